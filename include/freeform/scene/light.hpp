@@ -1,0 +1,66 @@
+#pragma once
+// Light sources. Each emits a deterministic, stratified set of rays aimed at the surface
+// aperture; rays that could not reach the aperture are never generated.
+#include <cstdint>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "../core/math.hpp"
+
+namespace freeform {
+
+// Parallel light travelling along `direction`, filling the aperture.
+struct CollimatedLight {
+    Vec3d direction{0, 0, -1};
+};
+
+// Isotropic (or profiled) point source. The intensity profile, if given, is a table of
+// (angle from `axis` in degrees, relative intensity), linearly interpolated and zero
+// outside the table. When `axis` is zero it points at the surface centre.
+struct PointLight {
+    Vec3d position{0, 0, 0.3};
+    Vec3d axis{0, 0, 0};
+    std::vector<std::pair<double, double>> profile;  // empty: isotropic
+};
+
+// Lambertian disk emitter (an extended source: LED die, lamp aperture).
+struct DiskLight {
+    Vec3d center{0, 0, 0.3};
+    Vec3d normal{0, 0, -1};
+    double radius = 0.005;
+};
+
+using LightShape = std::variant<CollimatedLight, PointLight, DiskLight>;
+
+struct Light {
+    LightShape shape = CollimatedLight{};
+    // Ray budget: `rays` if non-zero, otherwise rays_per_cell × receiver cells.
+    double rays_per_cell = 16;
+    std::int64_t rays = 0;
+};
+
+inline const char* light_type_name(const LightShape& s) {
+    switch (s.index()) {
+        case 0: return "collimated";
+        case 1: return "point";
+        default: return "disk";
+    }
+}
+
+// Relative intensity of a profile at `deg` degrees off axis.
+inline double profile_intensity(const std::vector<std::pair<double, double>>& profile, double deg) {
+    if (profile.empty()) return 1.0;
+    if (deg < profile.front().first || deg > profile.back().first) return 0.0;
+    for (std::size_t k = 1; k < profile.size(); ++k) {
+        const auto& [a0, i0] = profile[k - 1];
+        const auto& [a1, i1] = profile[k];
+        if (deg <= a1) {
+            const double t = a1 > a0 ? (deg - a0) / (a1 - a0) : 0.0;
+            return i0 + t * (i1 - i0);
+        }
+    }
+    return profile.back().second;
+}
+
+}  // namespace freeform

@@ -1,0 +1,163 @@
+#pragma once
+// Turning a light into rays. Rays are expressed in the surface frame (the tracing frame
+// of every tracer): the surface plane is w = 0 and its normal is +w. Every ray is aimed
+// at one stratum of the aperture; its weight is the power it carries, normalised so the
+// mean weight is one, and stored in fixed point (core/fixed_point.hpp).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "../core/error.hpp"
+#include "../core/fixed_point.hpp"
+#include "../core/rng.hpp"
+#include "../surface/heightmap.hpp"
+#include "light.hpp"
+#include "receiver.hpp"
+
+namespace freeform {
+
+struct RaySet {
+    std::vector<Vec3> origin;     // surface frame
+    std::vector<Vec3> direction;  // unit, surface frame
+    std::vector<Fixed> weight;
+    Fixed total = 0;  // N of the error formula: the weight reaching the surface
+
+    std::int64_t size() const { return std::int64_t(origin.size()); }
+};
+
+// Number of rays a light asks for in a scene with this receiver.
+inline std::int64_t ray_budget(const Light& light, const Receiver& receiver) {
+    if (light.rays > 0) return light.rays;
+    return std::max<std::int64_t>(1, std::llround(light.rays_per_cell * double(receiver.cells())));
+}
+
+namespace detail {
+
+// A jittered grid of about `count` points over the aperture: (u, v, dA).
+struct AperturePoint {
+    double u, v;
+};
+
+inline std::vector<AperturePoint> stratify_aperture(const Heightmap& s, std::int64_t count, std::uint64_t seed,
+                                                    double& cell_area) {
+    const Vec2d size = s.size();
+    // An elliptical aperture covers pi/4 of its bounding box: scale the grid so that
+    // about `count` strata fall inside.
+    const double fill = s.aperture() == Aperture::ellipse ? pi / 4.0 : 1.0;
+    const double strata = double(count) / fill;
+    int gx = std::max(1, int(std::lround(std::sqrt(strata * size.x / size.y))));
+    int gy = std::max(1, int(std::lround(strata / gx)));
+    cell_area = size.x * size.y / (double(gx) * gy);
+    std::vector<AperturePoint> pts;
+    pts.reserve(std::size_t(gx) * gy);
+    const double cu = size.x / (s.nx() - 1), cv = size.y / (s.ny() - 1);
+    for (int y = 0; y < gy; ++y) {
+        for (int x = 0; x < gx; ++x) {
+            CounterRng rng(seed, std::uint64_t(y) * std::uint64_t(gx) + std::uint64_t(x));
+            const double u = ((x + rng.uniform()) / gx - 0.5) * size.x;
+            const double v = ((y + rng.uniform()) / gy - 0.5) * size.y;
+            // Keep the sample only where the aperture mask has a surface cell.
+            const int ci = std::clamp(int((u + 0.5 * size.x) / cu), 0, s.nx() - 2);
+            const int cj = std::clamp(int((v + 0.5 * size.y) / cv), 0, s.ny() - 2);
+            if (s.cell_active(ci, cj)) pts.push_back({u, v});
+        }
+    }
+    return pts;
+}
+
+inline void finish(RaySet& rays, const std::vector<double>& w) {
+    double sum = 0;
+    for (double x : w) sum += x;
+    if (!(sum > 0)) throw InputError("light: no ray reaches the surface aperture (check light position and direction)");
+    const double scale = double(w.size()) / sum;
+    rays.weight.resize(w.size());
+    rays.total = 0;
+    for (std::size_t k = 0; k < w.size(); ++k) {
+        rays.weight[k] = to_fixed(w[k] * scale);
+        rays.total += rays.weight[k];
+    }
+}
+
+}  // namespace detail
+
+// Generates the rays of `light` aimed at the aperture of `surface`, deterministic for `seed`.
+inline RaySet generate_rays(const Light& light, const Heightmap& surface, const Receiver& receiver,
+                            std::uint64_t seed) {
+    const std::int64_t count = ray_budget(light, receiver);
+    const Frame& f = surface.frame();
+    double dA = 0;
+    const auto pts = detail::stratify_aperture(surface, count, seed, dA);
+    RaySet rays;
+    rays.origin.reserve(pts.size());
+    rays.direction.reserve(pts.size());
+    std::vector<double> w;
+    w.reserve(pts.size());
+    // Rays start just above the slab so that the whole path through it is traced.
+    const double top = double(surface.h_max()) + 1e-6 * std::max(surface.size().x, surface.size().y);
+
+    if (const auto* c = std::get_if<CollimatedLight>(&light.shape)) {
+        const double dl = length(c->direction);
+        if (!(dl > 0) || !std::isfinite(dl)) throw InputError("light.direction must be a finite non-zero vector");
+        const Vec3d d = f.dir_to_local(c->direction / dl);
+        if (!(d.z < -1e-9))
+            throw InputError("light.direction must point towards the surface's front (against surface.normal)");
+        for (const auto& p : pts) {
+            const double t = top / -d.z;  // from the plane w = top down to w = 0
+            const Vec3d o{p.u - t * d.x, p.v - t * d.y, top};
+            rays.origin.push_back(Vec3(o));
+            rays.direction.push_back(Vec3(d));
+            w.push_back(1.0);
+        }
+    } else if (const auto* pl = std::get_if<PointLight>(&light.shape)) {
+        const Vec3d pos = f.to_local(pl->position);
+        if (!(pos.z > top)) throw InputError("light.position must lie in front of the surface, above its height bounds");
+        Vec3d axis = length(pl->axis) > 0 ? f.dir_to_local(normalize(pl->axis)) : normalize(Vec3d{0, 0, 0} - pos);
+        for (const auto& p : pts) {
+            const Vec3d to = Vec3d{p.u, p.v, 0} - pos;
+            const double r2 = dot(to, to);
+            const Vec3d d = to / std::sqrt(r2);
+            const double deg = std::acos(std::clamp(dot(d, axis), -1.0, 1.0)) * 180.0 / pi;
+            const double weight = profile_intensity(pl->profile, deg) * (-d.z) * dA / r2;
+            if (!(weight > 0)) continue;
+            rays.origin.push_back(Vec3(pos));
+            rays.direction.push_back(Vec3(d));
+            w.push_back(weight);
+        }
+    } else {
+        const auto& disk = std::get<DiskLight>(light.shape);
+        const Vec3d c = f.to_local(disk.center);
+        const Frame df = make_frame(disk.center, disk.normal,
+                                    std::abs(disk.normal.z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, "light");
+        const Vec3d du = f.dir_to_local(df.u), dv = f.dir_to_local(df.v), dn = f.dir_to_local(df.w);
+        if (!(c.z > top)) throw InputError("light.center must lie in front of the surface, above its height bounds");
+        const double disk_area = pi * disk.radius * disk.radius;
+        // Stratify the disk too, pairing disk strata with aperture strata by a fixed
+        // scramble so that every aperture stratum sees a different part of the source.
+        const std::int64_t n = std::int64_t(pts.size());
+        const int g = std::max(1, int(std::lround(std::sqrt(double(n)))));
+        for (std::int64_t k = 0; k < n; ++k) {
+            const auto& p = pts[std::size_t(k)];
+            const std::uint64_t s = mix64(std::uint64_t(k) ^ mix64(seed)) % std::uint64_t(g * g);
+            CounterRng rng(seed ^ 0x5bd1e995ULL, std::uint64_t(k));
+            const double a = (double(s % g) + rng.uniform()) / g, b = (double(s / g) + rng.uniform()) / g;
+            // Concentric-free polar mapping is enough here: uniform in area.
+            const double r = disk.radius * std::sqrt(a), phi = 2 * pi * b;
+            const Vec3d o = c + (r * std::cos(phi)) * du + (r * std::sin(phi)) * dv;
+            const Vec3d to = Vec3d{p.u, p.v, 0} - o;
+            const double r2 = dot(to, to);
+            const Vec3d d = to / std::sqrt(r2);
+            const double cos_src = dot(d, dn);
+            const double weight = std::max(0.0, cos_src) * (-d.z) * dA * disk_area / r2;
+            if (!(weight > 0)) continue;
+            rays.origin.push_back(Vec3(o));
+            rays.direction.push_back(Vec3(d));
+            w.push_back(weight);
+        }
+    }
+    detail::finish(rays, w);
+    return rays;
+}
+
+}  // namespace freeform

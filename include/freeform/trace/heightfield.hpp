@@ -1,0 +1,78 @@
+#pragma once
+// HeightfieldTracer: the exact, BVH-free tracer for a scene made of one height field.
+// It handles mirrors (interreflections on the height field included, up to max_depth)
+// and lenses (front face = the height field, flat back face), with Phong correction.
+#include <cstdint>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "../core/exec.hpp"
+#include "heightfield_kernel.hpp"
+#include "tracer.hpp"
+
+namespace freeform {
+
+class HeightfieldTracer {
+public:
+    HeightfieldTracer(const Heightmap& surface, const RaySet& rays, const PathParams& params)
+        : surface_(&surface), rays_(&rays), params_(params) {}
+
+    static constexpr std::string_view name() { return "heightfield"; }
+    const RaySet& rays() const { return *rays_; }
+    const PathParams& params() const { return params_; }
+    const Heightmap& surface() const { return *surface_; }
+
+    // Height changes need no acceleration update: the traversal reads the heights.
+    void surface_changed(const Patch&) {}
+
+    // Traces every ray and deposits it; `totals` receives where the weight went.
+    template <HostPolicy P>
+    void trace_all(P policy, Histogram& out, TraceTotals& totals) const {
+        const int chunks = thread_count(policy);
+        std::vector<Histogram> partial(std::size_t(chunks), Histogram(out.width, out.height));
+        std::vector<TraceTotals> partial_totals(static_cast<std::size_t>(chunks));
+        const HeightfieldView hf = surface_->view();
+        const RaySet& r = *rays_;
+        for_each_chunk(policy, r.size(), chunks, [&](int c, std::int64_t begin, std::int64_t end) {
+            Histogram& h = partial[std::size_t(c)];
+            TraceTotals& t = partial_totals[std::size_t(c)];
+            for (std::int64_t k = begin; k < end; ++k) {
+                const RayRecord rec = trace_heightfield_ray(hf, params_, r.origin[std::size_t(k)],
+                                                            r.direction[std::size_t(k)], NoCellVisitor{});
+                const Fixed w = r.weight[std::size_t(k)];
+                t.add(rec.status, w);
+                deposit_record(params_.receiver, rec, w, h.cells);
+            }
+        });
+        totals.emitted = r.total;
+        merge_partials(partial, partial_totals, out, totals);
+    }
+
+    // Traces the rays `ids` into `records` (records[k] belongs to ids[k]).
+    template <HostPolicy P>
+    void trace(P policy, std::span<const std::int32_t> ids, std::span<RayRecord> records) const {
+        const HeightfieldView hf = surface_->view();
+        for_each(policy, std::int64_t(ids.size()), [&](std::int64_t k) {
+            const auto id = std::size_t(ids[std::size_t(k)]);
+            records[std::size_t(k)] =
+                trace_heightfield_ray(hf, params_, rays_->origin[id], rays_->direction[id], NoCellVisitor{});
+        });
+    }
+
+    // Traces one ray, reporting every surface cell its path crosses inside the slab.
+    template <class Visitor>
+    RayRecord trace_one(std::int32_t id, Visitor&& visit) const {
+        return trace_heightfield_ray(surface_->view(), params_, rays_->origin[std::size_t(id)],
+                                     rays_->direction[std::size_t(id)], visit);
+    }
+
+private:
+    const Heightmap* surface_;
+    const RaySet* rays_;
+    PathParams params_;
+};
+
+static_assert(Tracer<HeightfieldTracer>, "HeightfieldTracer must satisfy the Tracer concept");
+
+}  // namespace freeform

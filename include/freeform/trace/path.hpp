@@ -1,0 +1,214 @@
+#pragma once
+// The per-ray physics shared by every tracer: Phong-corrected hits, reflection and
+// refraction, the lens back face, the receiver and the deposit. A tracer only has to
+// find the nearest surface hit of a segment; `advance` does the rest. All functions are
+// FREEFORM_HD and work in the surface frame (surface plane w = 0, normal +w).
+#include <cmath>
+#include <cstdint>
+
+#include "../core/fixed_point.hpp"
+#include "../core/hd.hpp"
+#include "../core/math.hpp"
+#include "../core/view.hpp"
+
+namespace freeform {
+
+// What finally happened to a ray.
+enum class RayStatus : std::uint8_t {
+    receiver = 0,         // landed on the receiver (deposited)
+    missed_receiver = 1,  // left the surface but does not reach the receiver's front
+    missed_surface = 2,   // never interacted with the surface
+    lost_tir = 3,         // total internal reflection inside a lens
+    lost_depth = 4,       // more surface interactions than max_depth
+    absorbed = 5,         // blocked by an absorbing mesh or the lens side wall
+    active = 255,         // still being traced
+};
+
+// The outcome of tracing one ray: where it lands on the receiver, in continuous pixel
+// coordinates (px along columns, py along rows from the top), and its status.
+struct RayRecord {
+    float px = 0, py = 0;
+    RayStatus status = RayStatus::missed_surface;
+    std::uint8_t depth = 0;  // surface interactions
+
+    friend FREEFORM_HD bool operator==(const RayRecord& a, const RayRecord& b) {
+        return a.px == b.px && a.py == b.py && a.status == b.status && a.depth == b.depth;
+    }
+};
+
+// The receiver plane in the surface frame.
+struct ReceiverView {
+    Vec3 center{}, u{}, v{}, n{};  // n: front normal (facing the arriving light)
+    float inv_cell_u = 1, inv_cell_v = 1;
+    int width = 1, height = 1;
+    bool bilinear = true;
+
+    // Continuous pixel coordinates where the ray (o, d) meets the receiver's front.
+    FREEFORM_HD bool hit(Vec3 o, Vec3 d, float& px, float& py) const {
+        const float dn = dot(d, n);
+        if (!(dn < 0.0f)) return false;
+        const float t = dot(center - o, n) / dn;
+        if (!(t > 0.0f)) return false;
+        const Vec3 q = o + t * d - center;
+        px = dot(q, u) * inv_cell_u + 0.5f * float(width);
+        py = 0.5f * float(height) - dot(q, v) * inv_cell_v;
+        return px >= 0.0f && py >= 0.0f && px < float(width) && py < float(height);
+    }
+};
+
+// Splits a ray's weight over receiver cells. Calls add(cell_index, amount); the amounts
+// always sum to exactly `w`, so energy is conserved to the last bit.
+template <class Add>
+FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixed w, Add&& add) {
+    if (!rv.bilinear) {
+        int x = int(px), y = int(py);
+        x = x < rv.width ? x : rv.width - 1;
+        y = y < rv.height ? y : rv.height - 1;
+        add(std::int64_t(y) * rv.width + x, w);
+        return;
+    }
+    const float sx = px - 0.5f, sy = py - 0.5f;
+    const float flx = std::floor(sx), fly = std::floor(sy);
+    const double fx = double(sx - flx), fy = double(sy - fly);
+    int x0 = int(flx), y0 = int(fly);
+    int x1 = x0 + 1, y1 = y0 + 1;
+    x0 = x0 < 0 ? 0 : x0;
+    y0 = y0 < 0 ? 0 : y0;
+    x1 = x1 >= rv.width ? rv.width - 1 : x1;
+    y1 = y1 >= rv.height ? rv.height - 1 : y1;
+    const double wd = double(w);
+    const Fixed w11 = Fixed(wd * fx * fy);
+    const Fixed w10 = Fixed(wd * fx * (1.0 - fy));
+    const Fixed w01 = Fixed(wd * (1.0 - fx) * fy);
+    const Fixed w00 = w - w11 - w10 - w01;
+    add(std::int64_t(y0) * rv.width + x0, w00);
+    add(std::int64_t(y0) * rv.width + x1, w10);
+    add(std::int64_t(y1) * rv.width + x0, w01);
+    add(std::int64_t(y1) * rv.width + x1, w11);
+}
+
+// The nearest hit of a segment on a triangle of the surface (or of an extra mesh).
+enum class HitKind : std::uint8_t { none, surface, mirror_mesh, absorber };
+
+struct SurfaceHit {
+    float t = 0;
+    std::int32_t tri = -1;  // triangle id within its geometry (excluded on the next segment)
+    HitKind kind = HitKind::none;
+    float b0 = 0, b1 = 0, b2 = 0;  // barycentric weights of the three vertices
+    Vec3 p[3];                     // vertex positions (valid when kind != none)
+    Vec3 n[3];                     // unit vertex normals (valid when kind != none)
+};
+
+// Phong tessellation (Boubekeur & Alexa 2008): moves a flat hit onto the curved patch
+// defined by the vertex normals; alpha = 0 leaves it flat. Returns the corrected point.
+FREEFORM_HD inline Vec3 phong_point(const SurfaceHit& h, Vec3 flat, float alpha) {
+    if (alpha == 0.0f) return flat;
+    const float b[3] = {h.b0, h.b1, h.b2};
+    Vec3 offset{0, 0, 0};
+    for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - h.p[k], h.n[k])) * h.n[k];
+    return flat - alpha * offset;
+}
+
+FREEFORM_HD inline Vec3 shading_normal(const SurfaceHit& h) {
+    return normalize(h.b0 * h.n[0] + h.b1 * h.n[1] + h.b2 * h.n[2]);
+}
+
+// Material parameters in kernel form.
+struct MaterialView {
+    bool lens = false;
+    float ior = 1.5f;
+    float back_w = 0;                  // lens back face plane (w = -thickness)
+    float half_u = 0, half_v = 0;      // lens body half extents (side walls)
+};
+
+// The state of a ray between segments.
+struct PathState {
+    Vec3 o{}, d{};
+    std::int32_t exclude = -1;  // triangle the current segment starts on
+    bool inside = false;        // inside the lens body
+    std::uint8_t depth = 0;
+    RayStatus status = RayStatus::active;
+};
+
+// Which side of the surface a segment may hit: a mirror and the outside of a lens are
+// hit from the front (+w side); the inside of a lens from the back.
+FREEFORM_HD inline bool wants_front(const PathState& s) { return !s.inside; }
+
+struct PathParams {
+    MaterialView material;
+    ReceiverView receiver;
+    float phong_alpha = 0.75f;
+    int max_depth = 8;
+};
+
+// Given the nearest hit of the current segment (kind none when there is none), moves the
+// ray to its next segment or finishes it. Returns true while the ray is still active.
+FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const SurfaceHit& hit, RayRecord& rec) {
+    if (hit.kind == HitKind::none) {
+        if (s.inside) {
+            // Inside the lens: the segment ends on the flat back face.
+            const MaterialView& m = pp.material;
+            if (!(s.d.z < 0.0f)) {
+                s.status = RayStatus::absorbed;  // leaves through a side wall
+            } else {
+                const float t = (m.back_w - s.o.z) / s.d.z;
+                const Vec3 p = s.o + t * s.d;
+                Vec3 out;
+                if (std::fabs(p.x) > m.half_u || std::fabs(p.y) > m.half_v) {
+                    s.status = RayStatus::absorbed;
+                } else if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
+                    s.status = RayStatus::lost_tir;
+                } else {
+                    s.o = p;
+                    s.d = normalize(out);
+                    s.inside = false;
+                    s.exclude = -1;
+                    s.status = RayStatus::active;
+                    return true;  // one more segment: it may still meet nothing but the receiver
+                }
+            }
+        } else if (s.depth == 0) {
+            s.status = RayStatus::missed_surface;
+        } else if (pp.receiver.hit(s.o, s.d, rec.px, rec.py)) {
+            s.status = RayStatus::receiver;
+        } else {
+            s.status = RayStatus::missed_receiver;
+        }
+        rec.status = s.status;
+        rec.depth = s.depth;
+        return false;
+    }
+    if (hit.kind == HitKind::absorber) {
+        s.status = rec.status = RayStatus::absorbed;
+        rec.depth = s.depth;
+        return false;
+    }
+    if (++s.depth > pp.max_depth) {
+        s.status = rec.status = RayStatus::lost_depth;
+        rec.depth = s.depth;
+        return false;
+    }
+    const Vec3 flat = s.o + hit.t * s.d;
+    const Vec3 p = phong_point(hit, flat, pp.phong_alpha);
+    const Vec3 ns = shading_normal(hit);
+    s.o = p;
+    s.exclude = hit.tri;
+    if (hit.kind == HitKind::mirror_mesh || !pp.material.lens) {
+        s.d = normalize(reflect(s.d, ns));
+        return true;
+    }
+    // Lens front face: into the material from outside, out of it from inside.
+    Vec3 out;
+    const float from = s.inside ? pp.material.ior : 1.0f;
+    const float to = s.inside ? 1.0f : pp.material.ior;
+    if (!refract(s.d, ns, from, to, out)) {
+        s.status = rec.status = RayStatus::lost_tir;
+        rec.depth = s.depth;
+        return false;
+    }
+    s.d = normalize(out);
+    s.inside = !s.inside;
+    return true;
+}
+
+}  // namespace freeform

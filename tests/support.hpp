@@ -1,0 +1,72 @@
+#pragma once
+// Small builders shared by the tests: scenes made in code, traced in one call.
+#include <cmath>
+#include <functional>
+
+#include <freeform/scene/rays.hpp>
+#include <freeform/scene/scene.hpp>
+#include <freeform/trace/heightfield.hpp>
+#include <freeform/trace/setup.hpp>
+
+namespace freeform::testing {
+
+// The reference scene of DESIGN.md §2: a 0.1 m mirror at the origin facing +z, light
+// straight down, a 0.2 m receiver at z = 0.5 facing the mirror.
+inline Scene basic_scene(int receiver_px = 100, double rays_per_cell = 16) {
+    Scene s;
+    s.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
+    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
+    s.receiver.width = s.receiver.height = receiver_px;
+    s.receiver.deposit = Deposit::nearest;
+    s.light.rays_per_cell = rays_per_cell;
+    return s;
+}
+
+inline Heightmap surface_for(const Scene& s, int n) {
+    return Heightmap(n, n, s.surface.size, s.surface.h_min, s.surface.h_max, s.surface.frame, s.surface.aperture);
+}
+
+// Sets h(u, v) at every vertex (clamped to the bounds) and recomputes normals.
+inline void shape(Heightmap& hm, const std::function<double(double, double)>& h) {
+    std::vector<float> v(std::size_t(hm.nx()) * hm.ny());
+    for (int j = 0; j < hm.ny(); ++j)
+        for (int i = 0; i < hm.nx(); ++i) v[std::size_t(j) * hm.nx() + i] = float(h(hm.u_of(i), hm.v_of(j)));
+    hm.set_heights(v);
+}
+
+struct Traced {
+    Histogram histogram;
+    TraceTotals totals;
+};
+
+template <class P = exec::seq_t>
+inline Traced trace_scene(const Scene& s, const Heightmap& hm, const RaySet& rays, P policy = {}) {
+    HeightfieldTracer tracer(hm, rays, make_path_params(s));
+    Traced t{Histogram(s.receiver.width, s.receiver.height), {}};
+    tracer.trace_all(policy, t.histogram, t.totals);
+    return t;
+}
+
+inline Traced trace_scene(const Scene& s, const Heightmap& hm, std::uint64_t seed = 1) {
+    const RaySet rays = generate_rays(s.light, hm, s.receiver, seed);
+    return trace_scene(s, hm, rays);
+}
+
+// Weighted centroid of a histogram in pixel coordinates (x = column, y = row).
+inline Vec2d centroid(const Histogram& h) {
+    double sx = 0, sy = 0, sw = 0;
+    for (int y = 0; y < h.height; ++y)
+        for (int x = 0; x < h.width; ++x) {
+            const double w = double(h.cells[std::size_t(y) * h.width + x]);
+            sx += w * (x + 0.5), sy += w * (y + 0.5), sw += w;
+        }
+    return {sx / sw, sy / sw};
+}
+
+inline double l1_distance(const Histogram& a, const Histogram& b) {
+    double s = 0;
+    for (std::size_t k = 0; k < a.cells.size(); ++k) s += std::abs(double(a.cells[k]) - double(b.cells[k]));
+    return s;
+}
+
+}  // namespace freeform::testing
