@@ -119,16 +119,21 @@ public:
     // Recomputes the normals of the vertices in `p` (already including the stencil).
     void update_normals(const Patch& p) {
         const Patch q = p.clipped(nx_, ny_);
-        const double du2 = du(), dv2 = dv();
-        for (int j = q.j0; j <= q.j1; ++j) {
-            for (int i = q.i0; i <= q.i1; ++i) {
-                const int il = std::max(i - 1, 0), ir = std::min(i + 1, nx_ - 1);
-                const int jl = std::max(j - 1, 0), jr = std::min(j + 1, ny_ - 1);
-                const double dhdu = (double((*this)(ir, j)) - (*this)(il, j)) / ((ir - il) * du2);
-                const double dhdv = (double((*this)(i, jr)) - (*this)(i, jl)) / ((jr - jl) * dv2);
-                normals_[std::size_t(j) * nx_ + i] = static_cast<Vec3>(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
-            }
-        }
+        const auto h = [this](int i, int j) { return (*this)(i, j); };
+        for (int j = q.j0; j <= q.j1; ++j)
+            for (int i = q.i0; i <= q.i1; ++i) normals_[std::size_t(j) * nx_ + i] = vertex_normal(h, i, j);
+    }
+
+    // The normal at vertex (i, j) of a height field read through `h(i, j)`: central
+    // differences with the physical spacing, one-sided at the border. Shared by the
+    // height map and by overlays that preview a move, so both agree to the last bit.
+    template <class Heights>
+    Vec3 vertex_normal(const Heights& h, int i, int j) const {
+        const int il = i > 0 ? i - 1 : 0, ir = i < nx_ - 1 ? i + 1 : nx_ - 1;
+        const int jl = j > 0 ? j - 1 : 0, jr = j < ny_ - 1 ? j + 1 : ny_ - 1;
+        const double dhdu = (double(h(ir, j)) - double(h(il, j))) / ((ir - il) * du());
+        const double dhdv = (double(h(i, jr)) - double(h(i, jl))) / ((jr - jl) * dv());
+        return Vec3(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
     }
 
     HeightSnapshot snapshot(const Patch& p) const {

@@ -41,7 +41,8 @@ FREEFORM_HD inline void triangle_vertices(int nx, std::int32_t tri, int (&i)[3],
     }
 }
 
-FREEFORM_HD inline void fill_hit_vertices(const HeightfieldView& hf, SurfaceHit& hit) {
+template <class View>
+FREEFORM_HD inline void fill_hit_vertices(const View& hf, SurfaceHit& hit) {
     int i[3], j[3];
     triangle_vertices(hf.nx, hit.tri, i, j);
     for (int k = 0; k < 3; ++k) {
@@ -53,9 +54,9 @@ FREEFORM_HD inline void fill_hit_vertices(const HeightfieldView& hf, SurfaceHit&
 // Finds the nearest hit of the ray (o, d) with the height field, ignoring triangle
 // `exclude` and triangles seen from the wrong side (front: from +w). `visit(ci, cj)` is
 // called for every cell the segment crosses inside the slab, up to and including the
-// cell of the hit.
-template <class Visitor>
-FREEFORM_HD inline SurfaceHit find_heightfield_hit(const HeightfieldView& hf, Vec3 o, Vec3 d, std::int32_t exclude,
+// cell of the hit. `View` is HeightfieldView or OverlayView (surface/overlay.hpp).
+template <class View, class Visitor>
+FREEFORM_HD inline SurfaceHit find_heightfield_hit(const View& hf, Vec3 o, Vec3 d, std::int32_t exclude,
                                                    bool front, Visitor&& visit) {
     SurfaceHit hit;
     const float inf = INFINITY;
@@ -170,8 +171,8 @@ FREEFORM_HD inline SurfaceHit find_heightfield_hit(const HeightfieldView& hf, Ve
 }
 
 // Traces one ray through the height field to its end.
-template <class Visitor>
-FREEFORM_HD inline RayRecord trace_heightfield_ray(const HeightfieldView& hf, const PathParams& pp, Vec3 o, Vec3 d,
+template <class View, class Visitor>
+FREEFORM_HD inline RayRecord trace_heightfield_ray(const View& hf, const PathParams& pp, Vec3 o, Vec3 d,
                                                    Visitor&& visit) {
     PathState s;
     s.o = o;

@@ -1,0 +1,235 @@
+#pragma once
+// Text targets: locate a TrueType font and rasterise a string (stb_truetype, linked
+// from libstb) into a grey image, as large as fits, so that "target": {"text": "E"}
+// needs no image file.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <stb_truetype.h>
+
+#include "../core/error.hpp"
+#include "../core/histogram.hpp"
+#include "file.hpp"
+
+namespace freeform::io {
+
+namespace detail {
+
+inline std::vector<std::filesystem::path> font_directories() {
+    std::vector<std::filesystem::path> dirs = {"/usr/share/fonts/truetype/dejavu", "/usr/share/fonts",
+                                               "/usr/local/share/fonts"};
+    if (const char* home = std::getenv("HOME"); home && *home) {
+        dirs.emplace_back(std::filesystem::path(home) / ".local/share/fonts");
+        dirs.emplace_back(std::filesystem::path(home) / ".fonts");
+    }
+    return dirs;
+}
+
+// Decodes UTF-8 into code points; throws InputError at the first invalid sequence.
+inline std::vector<char32_t> decode_utf8(const std::string& text) {
+    std::vector<char32_t> out;
+    for (std::size_t i = 0; i < text.size();) {
+        const auto lead = static_cast<unsigned char>(text[i]);
+        int extra = 0;
+        char32_t cp = 0;
+        if (lead < 0x80) {
+            cp = lead;
+        } else if ((lead & 0xE0) == 0xC0) {
+            extra = 1;
+            cp = lead & 0x1F;
+        } else if ((lead & 0xF0) == 0xE0) {
+            extra = 2;
+            cp = lead & 0x0F;
+        } else if ((lead & 0xF8) == 0xF0) {
+            extra = 3;
+            cp = lead & 0x07;
+        } else {
+            throw InputError("render_text: invalid UTF-8 byte at offset " + std::to_string(i) + " of the text");
+        }
+        if (i + std::size_t(extra) >= text.size() && extra > 0)
+            throw InputError("render_text: truncated UTF-8 sequence at offset " + std::to_string(i) + " of the text");
+        for (int k = 1; k <= extra; ++k) {
+            const auto next = static_cast<unsigned char>(text[i + std::size_t(k)]);
+            if ((next & 0xC0) != 0x80)
+                throw InputError("render_text: invalid UTF-8 sequence at offset " + std::to_string(i) + " of the text");
+            cp = (cp << 6) | (next & 0x3F);
+        }
+        static constexpr char32_t smallest[4] = {0, 0x80, 0x800, 0x10000};
+        if (cp < smallest[extra] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))
+            throw InputError("render_text: invalid UTF-8 sequence at offset " + std::to_string(i) + " of the text");
+        out.push_back(cp);
+        i += std::size_t(extra) + 1;
+    }
+    return out;
+}
+
+inline std::string codepoint_name(char32_t cp) {
+    char name[16];
+    std::snprintf(name, sizeof name, "U+%04X", unsigned(cp));
+    return name;
+}
+
+}  // namespace detail
+
+// Finds a font file: `name` may be an existing path, a file name ("DejaVuSans-Bold.ttf")
+// or a bare name ("DejaVuSans-Bold", tried with .ttf, .otf and .ttc). Looks in
+// /usr/share/fonts/truetype/dejavu, then recursively in /usr/share/fonts,
+// /usr/local/share/fonts, ~/.local/share/fonts and ~/.fonts. Throws IoError listing
+// where it looked.
+inline std::filesystem::path find_font(const std::string& name) {
+    namespace fs = std::filesystem;
+    if (name.empty()) throw IoError("find_font: empty font name");
+    std::error_code ec;
+    if (fs::is_regular_file(name, ec)) return name;
+
+    std::vector<std::string> file_names;
+    const fs::path as_path(name);
+    if (as_path.has_extension())
+        file_names.push_back(as_path.filename().string());
+    for (const char* ext : {".ttf", ".otf", ".ttc"}) file_names.push_back(as_path.filename().string() + ext);
+
+    const auto dirs = detail::font_directories();
+    for (const fs::path& dir : dirs) {
+        for (const std::string& file_name : file_names)
+            if (fs::is_regular_file(dir / file_name, ec)) return dir / file_name;
+        // Font packages sort files into sub-directories; the lexicographically first
+        // match keeps the choice independent of directory iteration order.
+        fs::path best;
+        for (fs::recursive_directory_iterator it(dir, fs::directory_options::skip_permission_denied, ec), end;
+             !ec && it != end; it.increment(ec)) {
+            const fs::path& candidate = it->path();
+            if (std::find(file_names.begin(), file_names.end(), candidate.filename().string()) != file_names.end() &&
+                it->is_regular_file(ec) && (best.empty() || candidate < best))
+                best = candidate;
+        }
+        if (!best.empty()) return best;
+        ec.clear();
+    }
+
+    std::string looked;
+    for (const fs::path& dir : dirs) looked += (looked.empty() ? "" : ", ") + dir.string();
+    throw IoError("font '" + name + "' not found: not an existing file, and no " + file_names.front() +
+                  (file_names.size() > 1 ? " (or .otf/.ttc)" : "") + " in " + looked);
+}
+
+// Renders UTF-8 `text` ('\n' separates lines, each centred) as white antialiased
+// coverage in [0, 1] on black, in a height × width image. The ink bounding box (from
+// the glyph outlines) is scaled as large as fits inside the image minus `margin` (a
+// fraction of the width and of the height on each side, in [0, 0.5)) and centred.
+// Throws IoError if the font cannot be loaded, lacks a glyph, or the text has no ink;
+// InputError for bad sizes or invalid UTF-8.
+inline ImageF render_text(const std::string& text, const std::filesystem::path& font_file, int width, int height,
+                          double margin) {
+    if (width <= 0 || height <= 0)
+        throw InputError("render_text: image size " + std::to_string(width) + " x " + std::to_string(height) +
+                         " must be positive");
+    if (!(margin >= 0 && margin < 0.5))
+        throw InputError("render_text: margin " + std::to_string(margin) + " must be in [0, 0.5)");
+    const std::vector<char32_t> codepoints = detail::decode_utf8(text);
+
+    const std::string font_bytes = read_file_bytes(font_file);
+    const auto* font_data = reinterpret_cast<const unsigned char*>(font_bytes.data());
+    stbtt_fontinfo font{};
+    const int offset = font_bytes.size() >= 12 ? stbtt_GetFontOffsetForIndex(font_data, 0) : -1;
+    if (offset < 0 || !stbtt_InitFont(&font, font_data, offset))
+        throw IoError("cannot load font '" + font_file.string() + "': not a TrueType/OpenType font");
+
+    // Lay the glyphs out in font units with y pointing down (image convention).
+    struct Placed {
+        int glyph;
+        double pen_x, baseline;
+    };
+    int ascent = 0, descent = 0, line_gap = 0;
+    stbtt_GetFontVMetrics(&font, &ascent, &descent, &line_gap);
+    const double line_advance = double(ascent - descent + line_gap);
+
+    std::vector<Placed> placed;
+    double ink_x0 = std::numeric_limits<double>::infinity(), ink_y0 = ink_x0;
+    double ink_x1 = -ink_x0, ink_y1 = -ink_x0;
+    std::size_t line_start = 0;
+    double pen = 0, baseline = 0;
+    int previous = 0;
+    const auto finish_line = [&] {
+        // Centre the line on x = 0 by its advance width.
+        for (std::size_t k = line_start; k < placed.size(); ++k) placed[k].pen_x -= pen / 2;
+        line_start = placed.size();
+    };
+    for (char32_t cp : codepoints) {
+        if (cp == U'\r') continue;
+        if (cp == U'\n') {
+            finish_line();
+            pen = 0;
+            previous = 0;
+            baseline += line_advance;
+            continue;
+        }
+        const int glyph = stbtt_FindGlyphIndex(&font, int(cp == U'\t' ? U' ' : cp));
+        if (glyph == 0)
+            throw IoError("font '" + font_file.string() + "' has no glyph for " + detail::codepoint_name(cp));
+        if (previous) pen += stbtt_GetGlyphKernAdvance(&font, previous, glyph);
+        placed.push_back({glyph, pen, baseline});
+        int advance = 0, bearing = 0;
+        stbtt_GetGlyphHMetrics(&font, glyph, &advance, &bearing);
+        pen += advance;
+        previous = glyph;
+    }
+    finish_line();
+    for (const Placed& g : placed) {
+        int x0, y0, x1, y1;
+        if (stbtt_IsGlyphEmpty(&font, g.glyph) || !stbtt_GetGlyphBox(&font, g.glyph, &x0, &y0, &x1, &y1)) continue;
+        ink_x0 = std::min(ink_x0, g.pen_x + x0);
+        ink_x1 = std::max(ink_x1, g.pen_x + x1);
+        ink_y0 = std::min(ink_y0, g.baseline - y1);
+        ink_y1 = std::max(ink_y1, g.baseline - y0);
+    }
+    if (!(ink_x1 > ink_x0) || !(ink_y1 > ink_y0))
+        throw IoError("text '" + text + "' renders no ink with font '" + font_file.string() + "'");
+
+    // The slight shrink keeps rounding from pushing antialiased edges into the margin.
+    const double fit_w = width * (1 - 2 * margin), fit_h = height * (1 - 2 * margin);
+    const double scale = std::min(fit_w / (ink_x1 - ink_x0), fit_h / (ink_y1 - ink_y0)) * (1 - 1e-6);
+    const double shift_x = width / 2.0 - scale * (ink_x0 + ink_x1) / 2;
+    const double shift_y = height / 2.0 - scale * (ink_y0 + ink_y1) / 2;
+    const auto s = static_cast<float>(scale);
+
+    ImageF img = ImageF::Zero(height, width);
+    std::vector<unsigned char> bitmap;
+    for (const Placed& g : placed) {
+        if (stbtt_IsGlyphEmpty(&font, g.glyph)) continue;
+        const double origin_x = shift_x + scale * g.pen_x, origin_y = shift_y + scale * g.baseline;
+        const double base_x = std::floor(origin_x), base_y = std::floor(origin_y);
+        const auto sub_x = static_cast<float>(origin_x - base_x), sub_y = static_cast<float>(origin_y - base_y);
+        int ix0, iy0, ix1, iy1;
+        stbtt_GetGlyphBitmapBoxSubpixel(&font, g.glyph, s, s, sub_x, sub_y, &ix0, &iy0, &ix1, &iy1);
+        const int bw = ix1 - ix0, bh = iy1 - iy0;
+        if (bw <= 0 || bh <= 0) continue;
+        bitmap.assign(std::size_t(bw) * std::size_t(bh), 0);
+        stbtt_MakeGlyphBitmapSubpixel(&font, bitmap.data(), bw, bh, bw, s, s, sub_x, sub_y, g.glyph);
+        const long long left = static_cast<long long>(base_x) + ix0, top = static_cast<long long>(base_y) + iy0;
+        for (int j = 0; j < bh; ++j) {
+            const long long y = top + j;
+            if (y < 0 || y >= height) continue;
+            for (int i = 0; i < bw; ++i) {
+                const long long x = left + i;
+                if (x < 0 || x >= width) continue;
+                // Abutting glyph edges add up; overlaps saturate.
+                float& cell = img(Eigen::Index(y), Eigen::Index(x));
+                cell = std::min(1.0f, cell + bitmap[std::size_t(j) * bw + i] / 255.0f);
+            }
+        }
+    }
+    if (!(img.maxCoeff() > 0))
+        throw IoError("text '" + text + "' renders no ink with font '" + font_file.string() + "' at " +
+                      std::to_string(width) + " x " + std::to_string(height));
+    return img;
+}
+
+}  // namespace freeform::io

@@ -1,0 +1,248 @@
+#pragma once
+// Raster images in and out (stb_image / stb_image_write, linked from libstb), plus the
+// small colour helpers that turn irradiance and difference images into viewable PNGs.
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <stb_image.h>
+#include <stb_image_write.h>
+
+#include "../core/error.hpp"
+#include "../core/histogram.hpp"
+#include "file.hpp"
+#include "pfm.hpp"
+
+namespace freeform::io {
+
+// An 8-bit RGB image: rgb holds width × height × 3 bytes, row-major, row 0 at the top.
+struct RgbImage {
+    int width = 0;
+    int height = 0;
+    std::vector<std::uint8_t> rgb;
+
+    bool operator==(const RgbImage&) const = default;
+};
+
+namespace detail {
+
+inline std::string lower_extension(const std::filesystem::path& file) {
+    std::string ext = file.extension().string();
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
+inline std::uint8_t to_byte(double v01) {
+    if (!(v01 > 0)) return 0;  // also maps NaN to black
+    if (v01 >= 1) return 255;
+    return static_cast<std::uint8_t>(std::lround(v01 * 255.0));
+}
+
+inline void check_rgb(const RgbImage& img, const std::string& where) {
+    if (img.width < 0 || img.height < 0 ||
+        img.rgb.size() != std::size_t(img.width) * std::size_t(img.height) * 3)
+        throw InputError(where + ": RgbImage of " + std::to_string(img.width) + " x " +
+                         std::to_string(img.height) + " pixels holds " + std::to_string(img.rgb.size()) +
+                         " bytes instead of width * height * 3");
+}
+
+// Encodes interleaved 8-bit pixels as PNG in memory, then writes them atomically.
+inline void write_png_pixels(const std::filesystem::path& file, const std::uint8_t* pixels, int width,
+                             int height, int channels) {
+    if (width <= 0 || height <= 0)
+        throw IoError("cannot write PNG '" + file.string() + "': the image is empty");
+    std::string encoded;
+    auto append = [](void* context, void* data, int size) {
+        static_cast<std::string*>(context)->append(static_cast<const char*>(data), std::size_t(size));
+    };
+    if (!stbi_write_png_to_func(append, &encoded, width, height, channels, pixels, width * channels))
+        throw IoError("cannot write PNG '" + file.string() + "': encoding failed");
+    write_file_atomically(file, encoded);
+}
+
+struct StbiFree {
+    void operator()(void* p) const { stbi_image_free(p); }
+};
+
+}  // namespace detail
+
+// Reads an image as grey luminance. PNG, JPEG, BMP, TGA, GIF, PSD, PNM: 8-bit values are
+// divided by 255 and 16-bit ones by 65535, colour becomes Rec. 709 luma of the stored
+// (gamma-encoded) values, and alpha composites over black (transparent = no light).
+// Radiance HDR files give linear luminance, not clamped to [0, 1]. A ".pfm" extension
+// dispatches to read_pfm. Throws IoError naming the file and stb's reason on failure.
+inline ImageF read_image_grey(const std::filesystem::path& file) {
+    if (detail::lower_extension(file) == ".pfm") return read_pfm(file);
+
+    const std::string bytes = read_file_bytes(file);
+    if (bytes.size() > std::size_t(std::numeric_limits<int>::max()))
+        throw IoError("cannot read image '" + file.string() + "': file too large");
+    const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
+    const int size = static_cast<int>(bytes.size());
+
+    int width = 0, height = 0, channels = 0;
+    const bool hdr = stbi_is_hdr_from_memory(data, size) != 0;
+    const bool sixteen = !hdr && stbi_is_16_bit_from_memory(data, size) != 0;
+    std::unique_ptr<void, detail::StbiFree> pixels;
+    if (hdr)
+        pixels.reset(stbi_loadf_from_memory(data, size, &width, &height, &channels, 0));
+    else if (sixteen)
+        pixels.reset(stbi_load_16_from_memory(data, size, &width, &height, &channels, 0));
+    else
+        pixels.reset(stbi_load_from_memory(data, size, &width, &height, &channels, 0));
+    if (!pixels) {
+        const char* reason = stbi_failure_reason();
+        throw IoError("cannot read image '" + file.string() + "': " + (reason ? reason : "unknown error"));
+    }
+
+    auto sample = [&](std::size_t i) -> float {
+        if (hdr) return static_cast<const float*>(pixels.get())[i];
+        if (sixteen) return static_cast<const std::uint16_t*>(pixels.get())[i] / 65535.0f;
+        return static_cast<const stbi_uc*>(pixels.get())[i] / 255.0f;
+    };
+    ImageF img(height, width);
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) {
+            const std::size_t p = (std::size_t(y) * width + x) * channels;
+            float value = 0;
+            switch (channels) {
+                case 1: value = sample(p); break;
+                case 2: value = sample(p) * sample(p + 1); break;
+                default: {
+                    value = 0.2126f * sample(p) + 0.7152f * sample(p + 1) + 0.0722f * sample(p + 2);
+                    if (channels == 4) value *= sample(p + 3);
+                }
+            }
+            img(y, x) = value;
+        }
+    return img;
+}
+
+// Writes an 8-bit grey PNG; values are clamped to [0, 1] (NaN becomes 0).
+inline void write_png(const std::filesystem::path& file, const ImageF& grey01) {
+    std::vector<std::uint8_t> pixels(std::size_t(grey01.size()));
+    for (Eigen::Index y = 0; y < grey01.rows(); ++y)
+        for (Eigen::Index x = 0; x < grey01.cols(); ++x)
+            pixels[std::size_t(y * grey01.cols() + x)] = detail::to_byte(grey01(y, x));
+    detail::write_png_pixels(file, pixels.data(), int(grey01.cols()), int(grey01.rows()), 1);
+}
+
+// Writes an 8-bit RGB PNG.
+inline void write_png(const std::filesystem::path& file, const RgbImage& img) {
+    detail::check_rgb(img, "write_png('" + file.string() + "')");
+    detail::write_png_pixels(file, img.rgb.data(), img.width, img.height, 3);
+}
+
+// Writes an 8-bit RGB PNG from interleaved bytes: `rgb_interleaved` holds height rows of
+// width × 3 bytes (r, g, b per pixel), row 0 at the top.
+inline void write_png_rgb(const std::filesystem::path& file,
+                          const Eigen::Array<std::uint8_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>&
+                              rgb_interleaved,
+                          int width, int height) {
+    if (width <= 0 || height <= 0 || rgb_interleaved.rows() != height || rgb_interleaved.cols() != 3 * width)
+        throw InputError("write_png_rgb('" + file.string() + "'): expected a " + std::to_string(height) +
+                         " x " + std::to_string(3 * std::max(width, 0)) + " byte array for a " +
+                         std::to_string(width) + " x " + std::to_string(height) + " image, got " +
+                         std::to_string(rgb_interleaved.rows()) + " x " + std::to_string(rgb_interleaved.cols()));
+    detail::write_png_pixels(file, rgb_interleaved.data(), width, height, 3);
+}
+
+// A viewable image of an irradiance histogram: scales so that the `exposure_percentile`
+// quantile of the positive cells maps to 1, clamps to [0, 1] and applies 1/gamma.
+// An image with no positive cell maps to black. Throws InputError for a percentile
+// outside (0, 1] or a non-positive gamma.
+inline ImageF tone_map(const ImageD& irradiance, double exposure_percentile = 0.995, double gamma = 2.2) {
+    if (!(exposure_percentile > 0 && exposure_percentile <= 1))
+        throw InputError("tone_map: exposure_percentile " + std::to_string(exposure_percentile) +
+                         " is outside (0, 1]");
+    if (!(gamma > 0) || !std::isfinite(gamma))
+        throw InputError("tone_map: gamma " + std::to_string(gamma) + " must be a positive number");
+
+    std::vector<double> positive;
+    positive.reserve(std::size_t(irradiance.size()));
+    for (Eigen::Index i = 0; i < irradiance.size(); ++i) {
+        const double v = irradiance.data()[i];
+        if (v > 0 && std::isfinite(v)) positive.push_back(v);
+    }
+    ImageF out = ImageF::Zero(irradiance.rows(), irradiance.cols());
+    if (positive.empty()) return out;
+
+    const auto rank = static_cast<std::ptrdiff_t>(std::llround(exposure_percentile * double(positive.size() - 1)));
+    std::nth_element(positive.begin(), positive.begin() + rank, positive.end());
+    const double white = positive[std::size_t(rank)];
+    for (Eigen::Index i = 0; i < irradiance.size(); ++i) {
+        const double v = irradiance.data()[i] / white;
+        out.data()[i] = v > 0 ? static_cast<float>(std::pow(std::min(v, 1.0), 1.0 / gamma)) : 0.0f;
+    }
+    return out;
+}
+
+// Diverging blue-white-red colour map for signed differences: 0 is white, -limit and
+// below full blue, +limit and above full red. limit = 0 shows only the sign (any
+// non-zero value saturates); NaN is black. Throws InputError for a negative or
+// non-finite limit.
+inline RgbImage diverging(const ImageD& signed_values, double limit) {
+    if (!(limit >= 0) || !std::isfinite(limit))
+        throw InputError("diverging: limit " + std::to_string(limit) + " must be finite and >= 0");
+    constexpr double blue[3] = {33, 102, 172};
+    constexpr double red[3] = {178, 24, 43};
+
+    RgbImage img{int(signed_values.cols()), int(signed_values.rows()), {}};
+    img.rgb.resize(std::size_t(signed_values.size()) * 3);
+    for (Eigen::Index i = 0; i < signed_values.size(); ++i) {
+        const double v = signed_values.data()[i];
+        std::uint8_t* px = &img.rgb[std::size_t(i) * 3];
+        if (std::isnan(v)) {
+            px[0] = px[1] = px[2] = 0;
+            continue;
+        }
+        double t = limit > 0 ? v / limit : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
+        t = std::clamp(t, -1.0, 1.0);
+        const double* end = t < 0 ? blue : red;
+        const double a = std::abs(t);
+        for (int c = 0; c < 3; ++c) px[c] = static_cast<std::uint8_t>(std::lround(255.0 + a * (end[c] - 255.0)));
+    }
+    return img;
+}
+
+// Grey [0, 1] (clamped) to RGB, for composing with colour images.
+inline RgbImage grey_to_rgb(const ImageF& grey01) {
+    RgbImage img{int(grey01.cols()), int(grey01.rows()), {}};
+    img.rgb.resize(std::size_t(grey01.size()) * 3);
+    for (Eigen::Index i = 0; i < grey01.size(); ++i) {
+        const std::uint8_t v = detail::to_byte(grey01.data()[i]);
+        for (int c = 0; c < 3; ++c) img.rgb[std::size_t(i) * 3 + c] = v;
+    }
+    return img;
+}
+
+// Places images side by side, top-aligned, separated by gap_px black columns; shorter
+// images are padded with black below. Throws InputError for a negative gap or a part
+// whose byte count does not match its size.
+inline RgbImage hconcat(const std::vector<RgbImage>& parts, int gap_px = 4) {
+    if (gap_px < 0) throw InputError("hconcat: gap_px " + std::to_string(gap_px) + " must be >= 0");
+    RgbImage out;
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+        detail::check_rgb(parts[k], "hconcat part " + std::to_string(k));
+        out.width += parts[k].width + (k > 0 ? gap_px : 0);
+        out.height = std::max(out.height, parts[k].height);
+    }
+    out.rgb.assign(std::size_t(out.width) * out.height * 3, 0);
+    int x0 = 0;
+    for (const RgbImage& part : parts) {
+        for (int y = 0; y < part.height && part.width > 0; ++y)
+            std::copy_n(&part.rgb[std::size_t(y) * part.width * 3], std::size_t(part.width) * 3,
+                        &out.rgb[(std::size_t(y) * out.width + x0) * 3]);
+        x0 += part.width + gap_px;
+    }
+    return out;
+}
+
+}  // namespace freeform::io

@@ -1,0 +1,85 @@
+#pragma once
+// Targets: the irradiance the design should produce, as fixed-point cells summing to N.
+//
+// A target image holds relative irradiance (any scale; grey levels of a PNG, a PFM,
+// rendered text). For a level with receiver resolution W × H and N emitted weight, the
+// image is area-averaged to W × H (a box filter: coarse levels see the mean of the
+// pixels they cover) and scaled so that its cells sum to exactly N (DESIGN.md §1), with
+// the rounding remainder given to the cells with the largest fractional parts.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "../core/error.hpp"
+#include "../core/fixed_point.hpp"
+#include "../core/histogram.hpp"
+
+namespace freeform {
+
+struct Target {
+    int width = 0, height = 0;
+    std::vector<Fixed> cells;  // sums to `total`
+    Fixed total = 0;
+};
+
+// Area-weighted resampling of an image to w × h (exact box filter for any ratio).
+inline ImageD resample_area(const ImageD& img, int w, int h) {
+    const int W = int(img.cols()), H = int(img.rows());
+    ImageD out = ImageD::Zero(h, w);
+    const double sx = double(W) / w, sy = double(H) / h;
+    for (int y = 0; y < h; ++y) {
+        const double y0 = y * sy, y1 = (y + 1) * sy;
+        for (int x = 0; x < w; ++x) {
+            const double x0 = x * sx, x1 = (x + 1) * sx;
+            double sum = 0;
+            for (int py = int(y0); py < std::min(H, int(std::ceil(y1))); ++py) {
+                const double oy = std::min(y1, py + 1.0) - std::max(y0, double(py));
+                if (oy <= 0) continue;
+                for (int px = int(x0); px < std::min(W, int(std::ceil(x1))); ++px) {
+                    const double ox = std::min(x1, px + 1.0) - std::max(x0, double(px));
+                    if (ox > 0) sum += ox * oy * img(py, px);
+                }
+            }
+            out(y, x) = sum / (sx * sy);
+        }
+    }
+    return out;
+}
+
+// Builds the fixed-point target of one level from a relative-irradiance image.
+inline Target make_target(const ImageD& image, int w, int h, Fixed total) {
+    if (image.size() == 0) throw InputError("target: the image is empty");
+    if (!image.isFinite().all()) throw InputError("target: the image has non-finite values");
+    if ((image < 0).any()) throw InputError("target: the image has negative values");
+    const ImageD img = (image.cols() == w && image.rows() == h) ? image : resample_area(image, w, h);
+    const double sum = img.sum();
+    if (!(sum > 0)) throw InputError("target: the image is entirely black");
+    Target t;
+    t.width = w;
+    t.height = h;
+    t.total = total;
+    t.cells.resize(std::size_t(w) * h);
+    std::vector<double> frac(t.cells.size());
+    Fixed assigned = 0;
+    const double scale = double(total) / sum;
+    for (std::size_t k = 0; k < t.cells.size(); ++k) {
+        const double v = img.data()[k] * scale;
+        t.cells[k] = Fixed(std::floor(v));
+        frac[k] = v - std::floor(v);
+        assigned += t.cells[k];
+    }
+    // Hand out the remainder one unit at a time, largest fractions first (ties by index).
+    std::vector<std::size_t> order(t.cells.size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    Fixed rest = total - assigned;
+    if (rest > 0) {
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return frac[a] > frac[b]; });
+        for (std::size_t k = 0; rest > 0; k = (k + 1) % order.size(), --rest) ++t.cells[order[k]];
+    }
+    return t;
+}
+
+}  // namespace freeform

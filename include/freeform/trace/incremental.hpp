@@ -1,0 +1,299 @@
+#pragma once
+// Incremental evaluation (DESIGN.md §4): a move changes a few heights, so only the rays
+// whose paths cross the changed part of the surface can land elsewhere.
+//
+// For every surface cell we keep the rays whose path crosses that cell inside the height
+// slab [h_min, h_max] (every segment, not only the first hit): only those rays can meet
+// a triangle of that cell, whatever its heights. A move touching a patch retraces
+// exactly the rays listed on the cells whose triangles change (the patch dilated by the
+// normal stencil), against the surface as the move would leave it, and returns the
+// change of the histogram as a sparse delta. Accepting the move writes the new records
+// and updates the per-cell ray lists; rejecting it changes nothing.
+//
+// Invariant (tests/test_incremental.cpp): after any sequence of moves the maintained
+// records and histogram equal a full retrace bit for bit.
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "../core/exec.hpp"
+#include "../core/histogram.hpp"
+#include "../objective/image_terms.hpp"
+#include "../surface/overlay.hpp"
+#include "heightfield.hpp"
+
+namespace freeform {
+
+// Both directions of the ray <-> surface cell relation, updated in place.
+class RayCellIndex {
+public:
+    void reset(std::int64_t rays, std::int64_t cells) {
+        pool_.clear();
+        begin_.assign(std::size_t(rays), 0);
+        count_.assign(std::size_t(rays), 0);
+        capacity_.assign(std::size_t(rays), 0);
+        cell_rays_.assign(std::size_t(cells), {});
+        waste_ = 0;
+    }
+
+    std::span<const std::int32_t> cells_of(std::int32_t ray) const {
+        return {pool_.data() + begin_[std::size_t(ray)], count_[std::size_t(ray)]};
+    }
+    const std::vector<std::int32_t>& rays_of(std::int32_t cell) const { return cell_rays_[std::size_t(cell)]; }
+
+    // First assignment of a ray's cells (rays added in increasing order at build time).
+    void assign(std::int32_t ray, std::span<const std::int32_t> cells) {
+        store(ray, cells);
+        for (auto c : cells) cell_rays_[std::size_t(c)].push_back(ray);
+    }
+
+    // Replaces a ray's cells, touching only the cells that differ.
+    void replace(std::int32_t ray, std::span<const std::int32_t> cells) {
+        const auto old = cells_of(ray);
+        const bool same = old.size() == cells.size() && std::equal(old.begin(), old.end(), cells.begin());
+        if (same) return;
+        for (auto c : old)
+            if (std::find(cells.begin(), cells.end(), c) == cells.end()) {
+                auto& list = cell_rays_[std::size_t(c)];
+                auto it = std::find(list.begin(), list.end(), ray);
+                *it = list.back();
+                list.pop_back();
+            }
+        for (auto c : cells)
+            if (std::find(old.begin(), old.end(), c) == old.end()) cell_rays_[std::size_t(c)].push_back(ray);
+        store(ray, cells);
+    }
+
+    std::size_t memory_bytes() const {
+        std::size_t b = pool_.capacity() * 4 + begin_.capacity() * 8 + count_.capacity() * 2 * 2;
+        for (const auto& l : cell_rays_) b += l.capacity() * 4 + sizeof(l);
+        return b;
+    }
+
+private:
+    void store(std::int32_t ray, std::span<const std::int32_t> cells) {
+        const auto r = std::size_t(ray);
+        if (cells.size() <= capacity_[r]) {
+            std::copy(cells.begin(), cells.end(), pool_.begin() + begin_[r]);
+        } else {
+            waste_ += capacity_[r];
+            begin_[r] = std::int64_t(pool_.size());
+            capacity_[r] = std::uint16_t(std::min<std::size_t>(cells.size() + 2, 65535));
+            pool_.insert(pool_.end(), cells.begin(), cells.end());
+            pool_.resize(pool_.size() + (capacity_[r] - cells.size()), -1);
+        }
+        count_[r] = std::uint16_t(cells.size());
+        if (waste_ > std::int64_t(pool_.size() / 2) && pool_.size() > 4096) compact();
+    }
+    void compact() {
+        std::vector<std::int32_t> fresh;
+        fresh.reserve(pool_.size() - std::size_t(waste_));
+        for (std::size_t r = 0; r < begin_.size(); ++r) {
+            const std::int64_t b = std::int64_t(fresh.size());
+            fresh.insert(fresh.end(), pool_.begin() + begin_[r], pool_.begin() + begin_[r] + capacity_[r]);
+            begin_[r] = b;
+        }
+        pool_.swap(fresh);
+        waste_ = 0;
+    }
+
+    std::vector<std::int32_t> pool_;
+    std::vector<std::int64_t> begin_;
+    std::vector<std::uint16_t> count_, capacity_;
+    std::vector<std::vector<std::int32_t>> cell_rays_;
+    std::int64_t waste_ = 0;
+};
+
+// Collects the distinct surface cells a traced path crosses.
+struct CellCollector {
+    std::vector<std::int32_t>* out;
+    std::size_t first;  // where this ray's cells start in *out
+    int cells_per_row;
+    void operator()(int ci, int cj) const {
+        const std::int32_t c = cj * cells_per_row + ci;
+        for (std::size_t k = first; k < out->size(); ++k)
+            if ((*out)[k] == c) return;
+        out->push_back(c);
+    }
+};
+
+// The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
+// commit(). Holds its own working memory so several can be evaluated concurrently.
+struct TraceChange {
+    std::vector<std::int32_t> rays;       // affected rays
+    std::vector<RayRecord> records;       // their new records
+    std::vector<std::int32_t> cells;      // their new cell lists, packed
+    std::vector<std::int32_t> cell_begin; // rays.size() + 1 offsets into cells
+    SparseDelta histogram;                // change of R
+    std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
+    std::int64_t rays_moved = 0;          // rays whose record changed
+    std::vector<std::uint32_t> ray_mark;  // dedupe of affected rays (generation stamps)
+    std::uint32_t generation = 0;
+
+    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
+        if (std::int64_t(ray_mark.size()) != ray_count) ray_mark.assign(std::size_t(ray_count), 0), generation = 0;
+        if (std::int64_t(histogram.value.size()) != receiver_cells) histogram.resize(std::size_t(receiver_cells));
+        histogram.clear();
+        rays.clear();
+        records.clear();
+        cells.clear();
+        cell_begin.clear();
+        status_delta.fill(0);
+        rays_moved = 0;
+        if (++generation == 0) {
+            std::fill(ray_mark.begin(), ray_mark.end(), 0u);
+            generation = 1;
+        }
+    }
+};
+
+// Maintained per-ray records and ray/cell index for one height field, ray set and scene.
+class IncrementalTrace {
+public:
+    IncrementalTrace(const Heightmap& surface, const RaySet& rays, const PathParams& params)
+        : surface_(&surface), rays_(&rays), params_(params) {}
+
+    const RaySet& rays() const { return *rays_; }
+    const PathParams& params() const { return params_; }
+    const std::vector<RayRecord>& records() const { return records_; }
+    const RayCellIndex& index() const { return index_; }
+    const std::array<Fixed, 6>& weight_by_status() const { return status_weight_; }
+    int receiver_width() const { return params_.receiver.width; }
+    int receiver_height() const { return params_.receiver.height; }
+
+    // Full trace: records, index and histogram from scratch.
+    template <HostPolicy P>
+    Histogram rebuild(P policy) {
+        const std::int64_t n = rays_->size();
+        records_.assign(std::size_t(n), RayRecord{});
+        index_.reset(n, cell_count());
+        const int chunks = std::max(1, thread_count(policy));
+        std::vector<std::vector<std::int32_t>> chunk_cells(static_cast<std::size_t>(chunks));
+        std::vector<std::vector<std::int64_t>> chunk_begin(static_cast<std::size_t>(chunks));
+        const HeightfieldView hf = surface_->view();
+        for_each_chunk(policy, n, chunks, [&](int c, std::int64_t begin, std::int64_t end) {
+            auto& cells = chunk_cells[std::size_t(c)];
+            auto& starts = chunk_begin[std::size_t(c)];
+            for (std::int64_t k = begin; k < end; ++k) {
+                starts.push_back(std::int64_t(cells.size()));
+                CellCollector visit{&cells, cells.size(), surface_->nx() - 1};
+                records_[std::size_t(k)] = trace_heightfield_ray(hf, params_, rays_->origin[std::size_t(k)],
+                                                                 rays_->direction[std::size_t(k)], visit);
+            }
+            starts.push_back(std::int64_t(cells.size()));
+        });
+        for (int c = 0; c < chunks; ++c) {
+            const std::int64_t begin = n * c / chunks;
+            const auto& cells = chunk_cells[std::size_t(c)];
+            const auto& starts = chunk_begin[std::size_t(c)];
+            for (std::size_t k = 0; k + 1 < starts.size(); ++k)
+                index_.assign(std::int32_t(begin + std::int64_t(k)),
+                              std::span(cells.data() + starts[k], std::size_t(starts[k + 1] - starts[k])));
+        }
+        status_weight_.fill(0);
+        for (std::size_t k = 0; k < records_.size(); ++k)
+            status_weight_[std::size_t(records_[k].status)] += rays_->weight[k];
+        return histogram();
+    }
+
+    // The histogram of the maintained records.
+    Histogram histogram() const {
+        Histogram h(params_.receiver.width, params_.receiver.height);
+        for (std::size_t k = 0; k < records_.size(); ++k)
+            deposit_record(params_.receiver, records_[k], rays_->weight[k], h.cells);
+        return h;
+    }
+
+    // Surface cells whose triangles change when `o` is committed.
+    Patch affected_cells(const HeightOverlay& o) const {
+        const Patch& np = o.normal_patch;
+        return Patch{np.i0 - 1, np.j0 - 1, np.i1, np.j1}.clipped(surface_->nx() - 1, surface_->ny() - 1);
+    }
+
+    // Retraces the rays `o` can affect against the surface with `o` applied, without
+    // changing anything. Thread-safe for distinct `change` objects.
+    void evaluate(const HeightOverlay& o, TraceChange& change) const {
+        const OverlayView view = overlay_view(*surface_, o);
+        evaluate_with(o, change, [&](std::int32_t id, CellCollector& visit) {
+            return trace_heightfield_ray(view, params_, rays_->origin[std::size_t(id)],
+                                         rays_->direction[std::size_t(id)], visit);
+        });
+    }
+
+    // Same, with a caller-supplied retrace (used by tracers that must see the move in
+    // their own acceleration structure first, like Embree).
+    template <class Retrace>
+    void evaluate_with(const HeightOverlay& o, TraceChange& change, Retrace&& retrace) const {
+        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+        if (o.empty()) {
+            change.cell_begin.push_back(0);
+            return;
+        }
+        collect_rays(affected_cells(o), change);
+        const int cells_per_row = surface_->nx() - 1;
+        change.records.resize(change.rays.size());
+        change.cell_begin.resize(change.rays.size() + 1);
+        for (std::size_t k = 0; k < change.rays.size(); ++k) {
+            const std::int32_t id = change.rays[k];
+            change.cell_begin[k] = std::int32_t(change.cells.size());
+            CellCollector visit{&change.cells, change.cells.size(), cells_per_row};
+            const RayRecord now = retrace(id, visit);
+            change.records[k] = now;
+            const RayRecord& before = records_[std::size_t(id)];
+            if (now == before) continue;
+            ++change.rays_moved;
+            const Fixed w = rays_->weight[std::size_t(id)];
+            change.status_delta[std::size_t(before.status)] -= w;
+            change.status_delta[std::size_t(now.status)] += w;
+            deposit_record_delta(before, -w, change.histogram);
+            deposit_record_delta(now, w, change.histogram);
+        }
+        change.cell_begin[change.rays.size()] = std::int32_t(change.cells.size());
+    }
+
+    // Makes an evaluated change part of the state (the caller commits the heights).
+    void commit(const TraceChange& change) {
+        for (std::size_t k = 0; k < change.rays.size(); ++k) {
+            const std::int32_t id = change.rays[k];
+            records_[std::size_t(id)] = change.records[k];
+            index_.replace(id, std::span(change.cells.data() + change.cell_begin[k],
+                                         std::size_t(change.cell_begin[k + 1] - change.cell_begin[k])));
+        }
+        for (std::size_t s = 0; s < status_weight_.size(); ++s) status_weight_[s] += change.status_delta[s];
+    }
+
+private:
+    std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
+
+    void collect_rays(const Patch& cells, TraceChange& change) const {
+        const int row = surface_->nx() - 1;
+        for (int cj = cells.j0; cj <= cells.j1; ++cj)
+            for (int ci = cells.i0; ci <= cells.i1; ++ci)
+                for (auto id : index_.rays_of(cj * row + ci)) {
+                    auto& mark = change.ray_mark[std::size_t(id)];
+                    if (mark == change.generation) continue;
+                    mark = change.generation;
+                    change.rays.push_back(id);
+                }
+    }
+
+    void deposit_record_delta(const RayRecord& r, Fixed w, SparseDelta& d) const {
+        if (r.status != RayStatus::receiver) return;
+        if (w >= 0) {
+            deposit(params_.receiver, r.px, r.py, w, [&](std::int64_t c, Fixed a) { d.add(c, a); });
+        } else {  // the exact negation of the deposit made with +|w|
+            deposit(params_.receiver, r.px, r.py, -w, [&](std::int64_t c, Fixed a) { d.add(c, -a); });
+        }
+    }
+
+    const Heightmap* surface_;
+    const RaySet* rays_;
+    PathParams params_;
+    std::vector<RayRecord> records_;
+    RayCellIndex index_;
+    std::array<Fixed, 6> status_weight_{};
+};
+
+}  // namespace freeform
