@@ -1,0 +1,205 @@
+#pragma once
+// Scene files: reading a JSON scene from disk (scene/json.hpp does the validation),
+// checking that the files it names exist, and building the initial surface it asks for.
+#include <cmath>
+#include <cstddef>
+#include <filesystem>
+#include <set>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "../core/error.hpp"
+#include "../scene/json.hpp"
+#include "../scene/scene.hpp"
+#include "../surface/heightmap.hpp"
+#include "file.hpp"
+#include "pfm.hpp"
+
+namespace freeform::io {
+
+namespace detail {
+
+// nlohmann::json keeps the last of duplicated keys without a word; a scene that sets a
+// key twice is almost always an editing mistake, so the parser callback rejects it.
+class DuplicateKeyCheck {
+public:
+    bool operator()(int, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+        using E = nlohmann::json::parse_event_t;
+        switch (event) {
+            case E::object_start:
+            case E::array_start: levels_.push_back({event == E::object_start, child_path(), {}, {}, 0}); break;
+            case E::key: {
+                Level& top = levels_.back();
+                top.pending_key = parsed.get<std::string>();
+                if (!top.keys.insert(top.pending_key).second)
+                    throw InputError(scene_json::key_path(top.path, top.pending_key) +
+                                     ": duplicate key (a key may appear only once in an object)");
+                break;
+            }
+            case E::object_end:
+            case E::array_end:
+                levels_.pop_back();
+                count_element();
+                break;
+            case E::value: count_element(); break;
+        }
+        return true;
+    }
+
+private:
+    struct Level {
+        bool object;
+        std::string path;
+        std::set<std::string> keys;
+        std::string pending_key;
+        std::size_t index;
+    };
+
+    std::string child_path() const {
+        if (levels_.empty()) return "";
+        const Level& parent = levels_.back();
+        return parent.object ? scene_json::key_path(parent.path, parent.pending_key)
+                             : scene_json::index_path(parent.path, parent.index);
+    }
+    void count_element() {
+        if (!levels_.empty() && !levels_.back().object) ++levels_.back().index;
+    }
+
+    std::vector<Level> levels_;
+};
+
+// "line L, column C" of the 1-based byte offset that nlohmann reports.
+inline std::string text_position(const std::string& text, std::size_t byte) {
+    const std::size_t end = std::min(byte == 0 ? 0 : byte - 1, text.size());
+    std::size_t line = 1, line_start = 0;
+    for (std::size_t k = 0; k < end; ++k)
+        if (text[k] == '\n') ++line, line_start = k + 1;
+    return "line " + std::to_string(line) + ", column " + std::to_string(end - line_start + 1) + " (byte " +
+           std::to_string(byte) + ")";
+}
+
+// nlohmann's message without its "[json.exception...] parse error at ...: " prefix.
+inline std::string parse_error_detail(const std::string& what) {
+    const std::size_t at = what.find("parse error");
+    if (at != std::string::npos) {
+        const std::size_t colon = what.find(": ", at);
+        if (colon != std::string::npos) return what.substr(colon + 2);
+    }
+    const std::size_t bracket = what.find("] ");
+    return bracket == std::string::npos ? what : what.substr(bracket + 2);
+}
+
+inline std::filesystem::path resolve(const Scene& scene, const std::filesystem::path& p) {
+    if (p.empty() || p.is_absolute() || scene.base_dir.empty()) return p;
+    return (scene.base_dir / p).lexically_normal();
+}
+
+inline void require_file(const std::filesystem::path& p, const std::string& key) {
+    std::error_code ec;
+    const auto status = std::filesystem::status(p, ec);
+    if (ec || !std::filesystem::exists(status)) throw IoError(key + ": file not found: " + p.string());
+    if (!std::filesystem::is_regular_file(status)) throw IoError(key + ": not a regular file: " + p.string());
+}
+
+}  // namespace detail
+
+// Checks that every file the scene names exists (surface.initial, target.image,
+// meshes[k].file). Throws IoError naming the key and the path.
+inline void check_scene_files(const Scene& scene) {
+    if (!scene.surface.initial_pfm.empty())
+        detail::require_file(detail::resolve(scene, scene.surface.initial_pfm), "surface.initial");
+    if (scene.target && !scene.target->image.empty())
+        detail::require_file(detail::resolve(scene, scene.target->image), "target.image");
+    for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+        detail::require_file(detail::resolve(scene, scene.meshes[k].file), "meshes[" + std::to_string(k) + "].file");
+}
+
+// Reads, parses and validates a scene file; relative file names in it resolve against
+// the file's directory (Scene::base_dir, absolute). JSON comments (// and /* */) are
+// allowed. Every error names the file: syntax errors with line and column, bad values
+// with the key ("scene.json: surface.size[1]: must be > 0, got -0.1"). Missing files
+// throw IoError, everything else InputError.
+inline Scene load_scene(const std::filesystem::path& file) {
+    const std::string text = read_file_bytes(file);
+    const std::string name = file.string();
+    nlohmann::json j;
+    try {
+        j = nlohmann::json::parse(text, detail::DuplicateKeyCheck{}, /*allow_exceptions=*/true,
+                                  /*ignore_comments=*/true);
+    } catch (const nlohmann::json::parse_error& e) {
+        throw InputError(name + ": invalid JSON at " + detail::text_position(text, e.byte) + ": " +
+                         detail::parse_error_detail(e.what()));
+    } catch (const nlohmann::json::exception& e) {
+        // e.g. a number too large for a double (1e999): reported without a position.
+        throw InputError(name + ": invalid JSON: " + detail::parse_error_detail(e.what()));
+    } catch (const IoError&) {
+        throw;
+    } catch (const InputError& e) {
+        throw InputError(name + ": " + e.what());
+    }
+    Scene scene;
+    try {
+        scene = scene_from_json(j, std::filesystem::absolute(file).parent_path());
+        check_scene_files(scene);
+    } catch (const IoError& e) {
+        throw IoError(name + ": " + e.what());
+    } catch (const InputError& e) {
+        throw InputError(name + ": " + e.what());
+    }
+    return scene;
+}
+
+// The starting surface of a design on an nx × ny vertex grid: flat (height 0, clamped
+// to the bounds), the paraboloid h = r²/(4f), or the PFM heightmap of surface.initial
+// (values in metres; image row 0 is the +v edge), resampled bilinearly when its size
+// differs. Heights are clamped to surface.height_bounds.
+inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny) {
+    const SurfaceSpec& s = scene.surface;
+    Heightmap h(nx, ny, s.size, s.h_min, s.h_max, s.frame, s.aperture);
+    if (!s.initial_pfm.empty() && s.initial_paraboloid)
+        throw InputError("surface.initial: both a PFM file and a paraboloid are set");
+    if (s.initial_paraboloid) {
+        const double f = s.initial_paraboloid->focal_length;
+        if (!(f > 0) || !std::isfinite(f)) throw InputError("surface.initial.paraboloid.focal_length: must be > 0");
+        std::vector<float> heights(std::size_t(nx) * std::size_t(ny));
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) {
+                const double u = h.u_of(i), v = h.v_of(j);
+                heights[std::size_t(j) * nx + i] = float((u * u + v * v) / (4 * f));
+            }
+        h.set_heights(heights);
+        return h;
+    }
+    if (s.initial_pfm.empty()) return h;
+
+    const std::filesystem::path path = detail::resolve(scene, s.initial_pfm);
+    ImageF img;
+    try {
+        img = read_pfm(path);
+    } catch (const IoError& e) {
+        throw IoError(std::string("surface.initial: ") + e.what());
+    }
+    const int cols = int(img.cols()), rows = int(img.rows());
+    if (cols < 2 || rows < 2)
+        throw InputError("surface.initial: heightmap '" + path.string() + "' is " + std::to_string(cols) + " x " +
+                         std::to_string(rows) + " pixels; at least 2 x 2 are needed");
+    std::vector<float> heights(std::size_t(cols) * std::size_t(rows));
+    for (int r = 0; r < rows; ++r)
+        for (int c = 0; c < cols; ++c) {
+            const float value = img(r, c);
+            if (!std::isfinite(value))
+                throw InputError("surface.initial: heightmap '" + path.string() + "' has a non-finite value at row " +
+                                 std::to_string(r) + ", column " + std::to_string(c));
+            // Image row 0 is the top, the +v edge of the surface: grid row ny-1.
+            heights[std::size_t(rows - 1 - r) * cols + c] = value;
+        }
+    Heightmap from_file(cols, rows, s.size, s.h_min, s.h_max, s.frame, s.aperture);
+    from_file.set_heights(heights);
+    if (cols == nx && rows == ny) return from_file;
+    return from_file.resampled(nx, ny);
+}
+
+}  // namespace freeform::io

@@ -1,0 +1,344 @@
+#pragma once
+// The fabrication surface: the Phong-tessellated height field the tracers simulate,
+// as a fine triangle mesh (an open sheet) or as a closed lens solid, plus a topology and
+// volume check for meshes.
+//
+// Every grid cell (ci, cj) is split into k × k sub-cells; sub-vertex (a, b) of the cell
+// (cell-local coordinates in [0, 1]) lies in flat triangle 0 (v00, v10, v11) when a >= b,
+// with barycentric weights (1-a, a-b, b), and in triangle 1 (v00, v11, v01) otherwise,
+// with weights (1-b, a, b-a): the layout and the weights of find_heightfield_hit. The
+// sub-vertex is placed by the Phong formula of phong_point (trace/path.hpp) and gets the
+// normalised barycentric blend of the vertex normals (shading_normal). Sub-cells use the
+// same diagonal direction as the cells, so each sub-triangle lies over one flat triangle.
+//
+// The formula is evaluated in double with the nominal grid positions (Heightmap::u_of,
+// v_of), not in the float arithmetic of the kernels: the outline of the mesh is then the
+// exact rectangle and volumes come out to double precision, while the difference to the
+// float kernel (phong_point on HeightfieldView positions) is float rounding, nanometres
+// on a decimetre part. A point on a shared edge (the cell diagonal, or the side between
+// two cells) depends only on the edge's two end vertices, and the two triangles sum the
+// same non-zero terms, so both give the same position bit for bit: one vertex per grid
+// point, no cracks.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "../core/error.hpp"
+#include "../core/math.hpp"
+#include "../scene/frame.hpp"
+#include "../scene/material.hpp"
+#include "heightmap.hpp"
+#include "triangle_mesh.hpp"
+
+namespace freeform {
+
+// A point of the Phong-tessellated surface, in the surface frame.
+struct PhongVertex {
+    Vec3d position;
+    Vec3d normal;  // unit
+};
+
+// The Phong-tessellated point of flat triangle `tri` (ids as in triangle_vertices of
+// trace/heightfield_kernel.hpp) at barycentric weights (b0, b1, b2); alpha = 0 is flat.
+inline PhongVertex phong_vertex(const Heightmap& hm, std::int32_t tri, double b0, double b1, double b2, double alpha) {
+    const int nx = hm.nx();
+    const std::int32_t c = tri >> 1;
+    const int ci = int(c % (nx - 1)), cj = int(c / (nx - 1));
+    int vi[3], vj[3];
+    if ((tri & 1) == 0) {
+        vi[0] = ci, vj[0] = cj, vi[1] = ci + 1, vj[1] = cj, vi[2] = ci + 1, vj[2] = cj + 1;
+    } else {
+        vi[0] = ci, vj[0] = cj, vi[1] = ci + 1, vj[1] = cj + 1, vi[2] = ci, vj[2] = cj + 1;
+    }
+    const double b[3] = {b0, b1, b2};
+    Vec3d p[3], n[3];
+    for (int k = 0; k < 3; ++k) {
+        p[k] = {hm.u_of(vi[k]), hm.v_of(vj[k]), double(hm(vi[k], vj[k]))};
+        n[k] = Vec3d(hm.normals()[std::size_t(vj[k]) * nx + vi[k]]);
+    }
+    const Vec3d flat = b[0] * p[0] + b[1] * p[1] + b[2] * p[2];
+    PhongVertex out;
+    // The same expression as phong_point: subtract alpha times the weighted projections
+    // of the flat point onto the three vertex tangent planes' normals.
+    if (alpha == 0.0) {
+        out.position = flat;
+    } else {
+        Vec3d offset{0, 0, 0};
+        for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - p[k], n[k])) * n[k];
+        out.position = flat - alpha * offset;
+    }
+    out.normal = normalize(b[0] * n[0] + b[1] * n[1] + b[2] * n[2]);
+    return out;
+}
+
+// The Phong-tessellated point at cell-local coordinates (a, b) ∈ [0, 1]² of cell
+// (ci, cj), picking the flat triangle that contains it as the tracer does.
+inline PhongVertex phong_vertex_in_cell(const Heightmap& hm, int ci, int cj, double a, double b, double alpha) {
+    const std::int32_t base = 2 * (cj * (hm.nx() - 1) + ci);
+    if (a >= b) return phong_vertex(hm, base, 1.0 - a, a - b, b, alpha);
+    return phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
+}
+
+namespace detail {
+
+inline void check_export_args(const Heightmap& hm, double phong_alpha, int subdivisions) {
+    if (hm.nx() < 2 || hm.ny() < 2) throw InputError("cannot export an empty height map");
+    if (!std::isfinite(phong_alpha))
+        throw InputError("export: phong_alpha must be a finite number, got " + std::to_string(phong_alpha));
+    if (subdivisions < 1)
+        throw InputError("export: subdivisions must be at least 1, got " + std::to_string(subdivisions));
+    const double fine = (double(hm.nx() - 1) * subdivisions + 1) * (double(hm.ny() - 1) * subdivisions + 1);
+    // Two triangles per sub-cell, plus the lens solid's back face and walls: stay well
+    // inside the int32 indices of TriangleMesh.
+    if (fine > double(std::numeric_limits<std::int32_t>::max()) / 4)
+        throw InputError("export: subdivisions = " + std::to_string(subdivisions) + " on a " + std::to_string(hm.nx()) +
+                         " x " + std::to_string(hm.ny()) + " grid gives too many vertices for one mesh");
+}
+
+// The tessellated sheet in the surface frame. `fine_index` receives, per fine-grid
+// vertex (row-major, ((nx-1)k+1) columns), its index in the mesh or -1 when no active
+// cell uses it.
+inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, std::vector<std::int32_t>& fine_index) {
+    const int nx = hm.nx(), ny = hm.ny();
+    const int fx = (nx - 1) * k + 1, fy = (ny - 1) * k + 1;
+    fine_index.assign(std::size_t(fx) * fy, -1);
+    // A fine vertex is kept when one of the (up to four) cells around it is active.
+    for (int cj = 0; cj + 1 < ny; ++cj)
+        for (int ci = 0; ci + 1 < nx; ++ci) {
+            if (!hm.cell_active(ci, cj)) continue;
+            for (int r = 0; r <= k; ++r)
+                for (int s = 0; s <= k; ++s) fine_index[std::size_t(cj * k + r) * fx + (ci * k + s)] = 0;
+        }
+    TriangleMesh mesh;
+    std::int32_t next = 0;
+    for (int J = 0; J < fy; ++J)
+        for (int I = 0; I < fx; ++I) {
+            std::int32_t& idx = fine_index[std::size_t(J) * fx + I];
+            if (idx < 0) continue;
+            idx = next++;
+            // Any cell containing the point gives the same position (see the header); take
+            // the one to its upper right, the last one at the far borders.
+            const int ci = std::min(I / k, nx - 2), cj = std::min(J / k, ny - 2);
+            const double a = double(I - ci * k) / k, b = double(J - cj * k) / k;
+            const PhongVertex pv = phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
+            mesh.vertices.push_back(pv.position);
+            mesh.normals.push_back(pv.normal);
+        }
+    // Sub-cells in fine-grid row order: with k = 1 on a rectangular aperture, triangle t
+    // of the mesh is triangle t of the tracer.
+    for (int J = 0; J + 1 < fy; ++J)
+        for (int I = 0; I + 1 < fx; ++I) {
+            if (!hm.cell_active(I / k, J / k)) continue;
+            const auto at = [&](int i, int j) { return fine_index[std::size_t(j) * fx + i]; };
+            const std::int32_t v00 = at(I, J), v10 = at(I + 1, J), v11 = at(I + 1, J + 1), v01 = at(I, J + 1);
+            mesh.triangles.push_back({v00, v10, v11});
+            mesh.triangles.push_back({v00, v11, v01});
+        }
+    return mesh;
+}
+
+inline void to_world(const Frame& f, TriangleMesh& mesh) {
+    for (Vec3d& p : mesh.vertices) p = f.to_world(p);
+    for (Vec3d& n : mesh.normals) n = f.dir_to_world(n);
+}
+
+}  // namespace detail
+
+// The Phong-tessellated fabrication surface (an open sheet): ((nx-1)k+1) × ((ny-1)k+1)
+// shared vertices, 2k² triangles per active cell, counter-clockwise seen from +w (face
+// normals on the light side), per-vertex shading normals. Cells outside an elliptical
+// aperture are left out, and so are the vertices only they use. Coordinates are in the
+// world frame (Heightmap::frame()) unless world_frame is false.
+// Throws InputError for subdivisions < 1, a non-finite alpha or an oversized mesh.
+inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, int subdivisions,
+                                       bool world_frame = true) {
+    detail::check_export_args(hm, phong_alpha, subdivisions);
+    std::vector<std::int32_t> fine_index;
+    TriangleMesh mesh = detail::tessellate_local(hm, double(phong_alpha), subdivisions, fine_index);
+    if (world_frame) detail::to_world(hm.frame(), mesh);
+    return mesh;
+}
+
+// A closed, outward-oriented lens solid for machining or printing:
+//  - front: the tessellated surface of tessellate_surface over the active cells;
+//  - side walls: parallel to the surface normal, one quad (two triangles) under every
+//    boundary edge of the front, down to w = -thickness;
+//  - back: the plane w = -thickness, one or two triangles per cell (a fan around the
+//    cell centre where the cell has sub-vertices on the outline, so every boundary edge
+//    matches a wall edge exactly).
+// The solid covers the active cells: the full rectangle for a rectangular aperture, the
+// staircase of cells whose centres lie inside the ellipse for an elliptical one (the only
+// part of the front the tracer models). Phong correction moves boundary points a little
+// within the plane, as in the simulation; the walls follow them, so the outline is the
+// nominal one up to that displacement (about 1 µm for a steep dome on a 101 × 101 grid,
+// growing with slope and cell size). The solid is the union of vertical prisms under the
+// front triangles: its volume is ∫(h + thickness) dA over the tessellated front. Vertex
+// normals are not set (they are undefined along the sharp rims;
+// TriangleMesh::compute_normals() gives area-weighted ones).
+// Throws InputError for a thickness that is not positive and finite or that does not
+// clear the lowest point of the front, and for the arguments tessellate_surface rejects.
+inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, int subdivisions,
+                               bool world_frame = true) {
+    detail::check_export_args(hm, phong_alpha, subdivisions);
+    const double t = lens.thickness;
+    if (!(t > 0) || !std::isfinite(t))
+        throw InputError("lens thickness must be a positive finite number, got " + std::to_string(t));
+    const int k = subdivisions;
+    const int nx = hm.nx(), ny = hm.ny();
+    const int fx = (nx - 1) * k + 1;
+    std::vector<std::int32_t> fine_index;
+    TriangleMesh mesh = detail::tessellate_local(hm, double(phong_alpha), k, fine_index);
+    mesh.normals.clear();
+    const std::size_t front_count = mesh.vertices.size();
+    for (std::size_t v = 0; v < front_count; ++v)
+        if (!(mesh.vertices[v].z > -t))
+            throw InputError(
+                "lens thickness " + std::to_string(t) + " does not clear the front surface, which reaches w = " +
+                std::to_string(mesh.vertices[v].z) + ": the back face must lie below every point of the front");
+
+    // Back vertices are created on demand, one per front vertex that needs one.
+    std::vector<std::int32_t> back_of(front_count, -1);
+    const auto back = [&](std::int32_t front) {
+        std::int32_t& b = back_of[std::size_t(front)];
+        if (b < 0) {
+            const Vec3d p = mesh.vertices[std::size_t(front)];
+            b = std::int32_t(mesh.vertices.size());
+            mesh.vertices.push_back({p.x, p.y, -t});
+        }
+        return b;
+    };
+    const auto fine = [&](int I, int J) { return fine_index[std::size_t(J) * fx + I]; };
+    const auto active = [&](int ci, int cj) {
+        return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
+    };
+
+    std::vector<std::int32_t> ring;  // one cell's outline, counter-clockwise seen from +w
+    for (int cj = 0; cj + 1 < ny; ++cj)
+        for (int ci = 0; ci + 1 < nx; ++ci) {
+            if (!active(ci, cj)) continue;
+            // A side is on the outline when the cell across it is missing; there the front
+            // has k boundary edges, each getting a wall quad, and the back face takes all
+            // k + 1 points. The front runs counter-clockwise around the region, so its
+            // boundary edges follow the ring's direction.
+            const bool open_side[4] = {!active(ci, cj - 1), !active(ci + 1, cj), !active(ci, cj + 1),
+                                       !active(ci - 1, cj)};
+            const int I0 = ci * k, J0 = cj * k;
+            // Corner start points and unit steps of the four sides: bottom, right, top, left.
+            const int start[4][2] = {{I0, J0}, {I0 + k, J0}, {I0 + k, J0 + k}, {I0, J0 + k}};
+            const int step[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+            ring.clear();
+            bool any_open = false;
+            for (int s = 0; s < 4; ++s) {
+                if (!open_side[s]) {
+                    ring.push_back(fine(start[s][0], start[s][1]));
+                    continue;
+                }
+                any_open = true;
+                for (int m = 0; m < k; ++m) {
+                    const std::int32_t a = fine(start[s][0] + m * step[s][0], start[s][1] + m * step[s][1]);
+                    const std::int32_t b = fine(start[s][0] + (m + 1) * step[s][0], start[s][1] + (m + 1) * step[s][1]);
+                    ring.push_back(a);
+                    // Front edge a→b; the wall uses b→a on top and a'→b' at the bottom.
+                    const std::int32_t ab = back(a), bb = back(b);
+                    mesh.triangles.push_back({b, a, ab});
+                    mesh.triangles.push_back({b, ab, bb});
+                }
+            }
+            for (std::int32_t& v : ring) v = back(v);
+            // The back face looks along -w: its triangles run clockwise seen from +w.
+            if (!any_open) {
+                mesh.triangles.push_back({ring[0], ring[2], ring[1]});
+                mesh.triangles.push_back({ring[0], ring[3], ring[2]});
+                continue;
+            }
+            Vec3d centre{0, 0, 0};
+            for (int s = 0; s < 4; ++s)
+                centre = centre + mesh.vertices[std::size_t(back(fine(start[s][0], start[s][1])))];
+            const auto c = std::int32_t(mesh.vertices.size());
+            mesh.vertices.push_back(0.25 * centre);
+            for (std::size_t m = 0; m < ring.size(); ++m)
+                mesh.triangles.push_back({c, ring[(m + 1) % ring.size()], ring[m]});
+        }
+    if (world_frame) detail::to_world(hm.frame(), mesh);
+    return mesh;
+}
+
+// Topology and size of a triangle mesh.
+struct MeshCheck {
+    bool closed = false;           // every edge is shared by exactly two triangles
+    bool manifold = false;         // no edge is shared by more than two triangles (a boundary is allowed)
+    bool oriented = false;         // no directed edge is used twice: neighbours agree on orientation
+    double volume = 0;             // signed volume enclosed (divergence theorem); positive for an
+                                   // outward-oriented closed mesh, meaningless for an open one
+    double area = 0;               // total surface area
+    int boundary_edges = 0;        // edges used by one triangle
+    int non_manifold_edges = 0;    // edges used by three or more triangles
+    int degenerate_triangles = 0;  // triangles repeating a vertex index
+
+    // Closed, manifold and consistently oriented: a valid solid for slicers and CAM.
+    bool watertight() const { return closed && manifold && oriented && degenerate_triangles == 0; }
+};
+
+// Builds the edge map of the mesh (edges by vertex index, so coincident but distinct
+// vertices count as different) and sums area and signed volume. Throws InputError for a
+// triangle index outside the vertex list.
+inline MeshCheck check_mesh(const TriangleMesh& mesh) {
+    MeshCheck r;
+    const auto nv = std::int64_t(mesh.vertices.size());
+    // Volume relative to the bounding-box centre: the same for a closed mesh, with far
+    // less cancellation for a part that sits far from the origin.
+    Vec3d lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    for (const Vec3d& p : mesh.vertices) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    const Vec3d ref = mesh.vertices.empty() ? Vec3d{0, 0, 0} : 0.5 * (lo + hi);
+
+    // (undirected key, 1 when stored low → high) for every triangle edge.
+    std::vector<std::pair<std::uint64_t, std::uint8_t>> edges;
+    edges.reserve(mesh.triangles.size() * 3);
+    double six_volume = 0;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const auto& tri = mesh.triangles[t];
+        for (std::int32_t v : tri)
+            if (v < 0 || v >= nv)
+                throw InputError("check_mesh: triangle " + std::to_string(t) + " refers to vertex " +
+                                 std::to_string(v) + " of " + std::to_string(nv));
+        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[2] == tri[0]) {
+            ++r.degenerate_triangles;
+            continue;
+        }
+        const Vec3d a = mesh.vertices[std::size_t(tri[0])] - ref, b = mesh.vertices[std::size_t(tri[1])] - ref,
+                    c = mesh.vertices[std::size_t(tri[2])] - ref;
+        r.area += 0.5 * length(cross(b - a, c - a));
+        six_volume += dot(a, cross(b, c));
+        for (int e = 0; e < 3; ++e) {
+            const auto from = std::uint32_t(tri[e]), to = std::uint32_t(tri[(e + 1) % 3]);
+            const std::uint64_t key = from < to ? (std::uint64_t(from) << 32 | to) : (std::uint64_t(to) << 32 | from);
+            edges.emplace_back(key, std::uint8_t(from < to ? 1 : 0));
+        }
+    }
+    r.volume = six_volume / 6.0;
+    std::sort(edges.begin(), edges.end());
+    r.oriented = true;
+    for (std::size_t e = 0; e < edges.size();) {
+        std::size_t f = e;
+        int forward = 0;
+        while (f < edges.size() && edges[f].first == edges[e].first) forward += edges[f++].second;
+        const int uses = int(f - e);
+        if (uses == 1) ++r.boundary_edges;
+        if (uses > 2) ++r.non_manifold_edges;
+        if (forward > 1 || uses - forward > 1) r.oriented = false;
+        e = f;
+    }
+    r.manifold = r.non_manifold_edges == 0;
+    r.closed = r.manifold && r.boundary_edges == 0 && !mesh.triangles.empty();
+    return r;
+}
+
+}  // namespace freeform
