@@ -329,9 +329,12 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
     s.frame = read_frame(o, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
     if (const json* v = o.find("size")) s.size = positive_vec2(*v, o.at("size"));
     if (const json* v = o.find("mesh")) {
-        const auto m = int_pair(*v, o.at("mesh"), 2, max_grid_side);
-        s.nx = int(m[0]);
-        s.ny = int(m[1]);
+        if (!(v->is_string() && v->get<std::string>() == "auto")) {
+            if (v->is_string()) throw error(o.at("mesh"), "expected \"auto\" or an array of 2 integers, got " + describe(*v));
+            const auto m = int_pair(*v, o.at("mesh"), 2, max_grid_side);
+            s.nx = int(m[0]);
+            s.ny = int(m[1]);
+        }
     }
     if (const json* v = o.find("height_bounds")) {
         const std::string p = o.at("height_bounds");
@@ -565,6 +568,64 @@ inline TraceSpec read_trace(const json& j) {
 
 // The optimiser keys, one row each: name, how to read it (validating), how to write it.
 // Adding a setting is adding a row (and a field to OptimiseSpec).
+inline bool boolean(const json& v, const std::string& path) {
+    if (!v.is_boolean()) throw error(path, "expected true or false, got " + describe(v));
+    return v.get<bool>();
+}
+
+// An integer n or a pair [x, y] of integers in [lo, hi].
+inline std::array<std::int64_t, 2> int_or_pair(const json& v, const std::string& path, std::int64_t lo,
+                                               std::int64_t hi) {
+    if (v.is_number()) {
+        const std::int64_t n = integer(v, path, lo, hi);
+        return {n, n};
+    }
+    return int_pair(v, path, lo, hi);
+}
+
+inline std::vector<LevelPlan> read_levels(const json& v, const std::string& path) {
+    if (!v.is_array() || v.empty()) throw error(path, "expected a non-empty array of level objects, got " + describe(v));
+    std::vector<LevelPlan> levels;
+    for (std::size_t k = 0; k < v.size(); ++k) {
+        const Object o(v[k], index_path(path, k));
+        static constexpr std::array<std::string_view, 5> keys{"mesh", "resolution", "kernels", "time_share",
+                                                              "iterations"};
+        o.only(keys);
+        LevelPlan l;
+        const auto m = int_or_pair(o.require("mesh"), o.at("mesh"), 2, max_grid_side);
+        l.mesh_x = int(m[0]), l.mesh_y = int(m[1]);
+        const auto r = int_or_pair(o.require("resolution"), o.at("resolution"), 1, max_grid_side);
+        l.resolution_x = int(r[0]), l.resolution_y = int(r[1]);
+        if (const json* ks = o.find("kernels")) {
+            const std::string kp = o.at("kernels");
+            if (!ks->is_array() || ks->empty()) throw error(kp, "expected a non-empty array of odd integers, got " + describe(*ks));
+            for (std::size_t i = 0; i < ks->size(); ++i) {
+                const std::int64_t s = integer((*ks)[i], index_path(kp, i), 1, 2001);
+                if (s % 2 == 0) throw error(index_path(kp, i), "must be odd, got " + std::to_string(s));
+                l.kernel_supports.push_back(int(s));
+            }
+        }
+        if (const json* t = o.find("time_share")) l.time_share = number_in(*t, o.at("time_share"), 0, 1);
+        if (const json* t = o.find("iterations")) l.iterations = integer(*t, o.at("iterations"), 0);
+        levels.push_back(l);
+    }
+    return levels;
+}
+
+inline json levels_json(const std::vector<LevelPlan>& levels) {
+    json out = json::array();
+    for (const auto& l : levels) {
+        json j = json::object();
+        j["mesh"] = json::array({l.mesh_x, l.mesh_y});
+        j["resolution"] = json::array({l.resolution_x, l.resolution_y});
+        if (!l.kernel_supports.empty()) j["kernels"] = l.kernel_supports;
+        j["time_share"] = l.time_share;
+        j["iterations"] = l.iterations;
+        out.push_back(j);
+    }
+    return out;
+}
+
 struct OptimiseKey {
     std::string_view name;
     void (*read)(const json& v, const std::string& path, OptimiseSpec& o);
@@ -586,6 +647,86 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"threads",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.threads = int(integer(v, p, 0, 65536)); },
          [](const OptimiseSpec& o, json& j) { j["threads"] = o.threads; }},
+        {"speculative",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.speculative = int(integer(v, p, 0, 256)); },
+         [](const OptimiseSpec& o, json& j) { j["speculative"] = o.speculative; }},
+        {"levels", [](const json& v, const std::string& p, OptimiseSpec& o) { o.levels = read_levels(v, p); },
+         [](const OptimiseSpec& o, json& j) {
+             if (!o.levels.empty()) j["levels"] = levels_json(o.levels);
+         }},
+        {"multilevel", [](const json& v, const std::string& p, OptimiseSpec& o) { o.multilevel = boolean(v, p); },
+         [](const OptimiseSpec& o, json& j) { j["multilevel"] = o.multilevel; }},
+        {"sobel_weight",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.sobel_weight = number_in(v, p, 0, 10); },
+         [](const OptimiseSpec& o, json& j) { j["sobel_weight"] = o.sobel_weight; }},
+        {"energy_threshold",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.energy_threshold = number_in(v, p, 0, 1); },
+         [](const OptimiseSpec& o, json& j) { j["energy_threshold"] = o.energy_threshold; }},
+        {"height_bound_weight",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.height_bound_weight = number_in(v, p, 0, 1e6); },
+         [](const OptimiseSpec& o, json& j) { j["height_bound_weight"] = o.height_bound_weight; }},
+        {"valley_weight",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.valley_weight = number_in(v, p, 0, 1e6); },
+         [](const OptimiseSpec& o, json& j) { j["valley_weight"] = o.valley_weight; }},
+        {"valley_min_angle",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.valley_min_angle = number_in(v, p, 0, 180); },
+         [](const OptimiseSpec& o, json& j) { j["valley_min_angle"] = o.valley_min_angle; }},
+        {"smoothness_weight",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.smoothness_weight = number_in(v, p, 0, 1e6); },
+         [](const OptimiseSpec& o, json& j) { j["smoothness_weight"] = o.smoothness_weight; }},
+        {"bandit",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.bandit = string_value(v, p);
+             static constexpr std::array<std::string_view, 4> names{"uniform", "history", "ucb1", "discounted-ucb"};
+             if (std::find(names.begin(), names.end(), o.bandit) == names.end())
+                 throw error(p, "must be one of \"uniform\", \"history\", \"ucb1\", \"discounted-ucb\", got " +
+                                    describe(v));
+         },
+         [](const OptimiseSpec& o, json& j) { j["bandit"] = o.bandit; }},
+        {"bandit_sync",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.bandit_sync = int(integer(v, p, 1, 1 << 20)); },
+         [](const OptimiseSpec& o, json& j) { j["bandit_sync"] = o.bandit_sync; }},
+        {"error_guided",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.error_guided = boolean(v, p); },
+         [](const OptimiseSpec& o, json& j) { j["error_guided"] = o.error_guided; }},
+        {"single_vertex",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.single_vertex = boolean(v, p); },
+         [](const OptimiseSpec& o, json& j) { j["single_vertex"] = o.single_vertex; }},
+        {"max_shift_cells",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.max_shift_cells = number_in(v, p, 1e-6, 1e4); },
+         [](const OptimiseSpec& o, json& j) { j["max_shift_cells"] = o.max_shift_cells; }},
+        {"min_shift_cells",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.min_shift_cells = number_in(v, p, 0, 1e4); },
+         [](const OptimiseSpec& o, json& j) { j["min_shift_cells"] = o.min_shift_cells; }},
+        {"initial_acceptance",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.initial_acceptance = number_in(v, p, 1e-6, 0.999);
+         },
+         [](const OptimiseSpec& o, json& j) { j["initial_acceptance"] = o.initial_acceptance; }},
+        {"cooling",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.cooling = number_in(v, p, 1e-6, 1); },
+         [](const OptimiseSpec& o, json& j) { j["cooling"] = o.cooling; }},
+        {"temperature_steps",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.temperature_steps = int(integer(v, p, 1, 1 << 24));
+         },
+         [](const OptimiseSpec& o, json& j) { j["temperature_steps"] = o.temperature_steps; }},
+        {"reheat_factor",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.reheat_factor = number_in(v, p, 1e-6, 1); },
+         [](const OptimiseSpec& o, json& j) { j["reheat_factor"] = o.reheat_factor; }},
+        {"patience_fraction",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.patience_fraction = number_in(v, p, 0, 1); },
+         [](const OptimiseSpec& o, json& j) { j["patience_fraction"] = o.patience_fraction; }},
+        {"smooth_iterations",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.smooth_iterations = int(integer(v, p, 0, 10000));
+         },
+         [](const OptimiseSpec& o, json& j) { j["smooth_iterations"] = o.smooth_iterations; }},
+        {"export_subdivisions",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.export_subdivisions = int(integer(v, p, 1, 64));
+         },
+         [](const OptimiseSpec& o, json& j) { j["export_subdivisions"] = o.export_subdivisions; }},
     };
     return table;
 }
@@ -677,7 +818,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     surface["normal"] = vec_json(sf.frame.w);
     surface["up"] = vec_json(sf.frame.v);
     surface["size"] = vec_json(sf.size);
-    surface["mesh"] = json::array({sf.nx, sf.ny});
+    surface["mesh"] = sf.nx > 0 ? json::array({sf.nx, sf.ny}) : json("auto");
     surface["height_bounds"] = json::array({sf.h_min, sf.h_max});
     surface["aperture"] = enum_name(sf.aperture, aperture_names);
     if (const auto* lens = std::get_if<Lens>(&sf.material))

@@ -22,7 +22,7 @@ struct InitialParaboloid {
 struct SurfaceSpec {
     Frame frame{};
     Vec2d size{0.1, 0.1};
-    int nx = 101, ny = 101;  // final mesh (vertices); coarser levels are derived from it
+    int nx = 0, ny = 0;  // final mesh (vertices); 0 = "auto": chosen from the case
     double h_min = -0.005, h_max = 0.005;
     Aperture aperture = Aperture::rect;
     Material material = Mirror{};
@@ -52,13 +52,54 @@ struct TraceSpec {
     int max_depth = 8;  // surface interactions per ray before it is counted as lost
 };
 
-// Optimiser settings; zero / empty fields mean "derive a default from the case".
+// One level of the multi-level schedule (design/designer.hpp).
+struct LevelPlan {
+    int mesh_x = 0, mesh_y = 0;        // surface vertices
+    int resolution_x = 0, resolution_y = 0;  // receiver pixels
+    std::vector<int> kernel_supports;  // one annealing stage per support, large to small
+    double time_share = 1.0;           // fraction of the time budget
+    std::int64_t iterations = 0;       // iteration budget of the level (split over its stages)
+};
+
+// Optimiser settings (the scene's "optimise" block; docs/scene.md lists each key).
+// Zero / empty fields mean "derive a default from the case".
 struct OptimiseSpec {
-    double time_budget = 60;  // seconds
+    double time_budget = 60;  // seconds for the whole design
     std::uint64_t seed = 1;
-    std::int64_t max_iterations = 0;
-    double target_error = 0;
-    int threads = 0;
+    std::int64_t max_iterations = 0;  // over all levels; 0: the plan's budgets
+    double target_error = 0;          // stop when the objective reaches it; 0: off
+    int threads = 0;                  // 0: all cores
+    int speculative = 0;              // proposals evaluated at once; 0: one per thread
+    std::vector<LevelPlan> levels;    // empty: planned from the case
+    bool multilevel = true;           // false: only the final level
+
+    // Objective.
+    double sobel_weight = 0.1;
+    double energy_threshold = 0.95;
+    double height_bound_weight = 0;
+    double valley_weight = 0;
+    double valley_min_angle = 170;  // degrees
+    double smoothness_weight = 0;
+
+    // Proposals.
+    std::string bandit = "history";
+    int bandit_sync = 64;
+    bool error_guided = false;
+    bool single_vertex = false;
+    double max_shift_cells = 4.0;
+    double min_shift_cells = 0.25;
+
+    // Annealing schedule.
+    double initial_acceptance = 0.3;  // of uphill moves at the start of each stage
+    double cooling = 0.95;
+    int temperature_steps = 120;      // cooling steps per stage
+    double reheat_factor = 0.5;
+    double patience_fraction = 0.08;  // re-heat after this fraction of a stage without a new best
+
+    // Output.
+    int smooth_iterations = 0;        // post-processing passes of smooth_heights
+    int export_subdivisions = 4;      // Phong tessellation level of the exported mesh
+    std::int64_t progress_every = 2000;
 };
 
 struct Scene {

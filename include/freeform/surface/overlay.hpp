@@ -7,6 +7,7 @@
 // OverlayView reads heights and normals from the overlay inside its patches and from the
 // base everywhere else; the tracing kernels are templated on the view type, so the plain
 // HeightfieldView pays nothing for this.
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -31,6 +32,33 @@ struct HeightOverlay {
         std::size_t k = 0;
         for (int j = normal_patch.j0; j <= normal_patch.j1; ++j)
             for (int i = normal_patch.i0; i <= normal_patch.i1; ++i) normals[k++] = base.vertex_normal(h, i, j);
+    }
+
+    // Shrinks the patch to the bounding box of the heights that really change (a kernel's
+    // faint rim, or heights pinned at a bound, change nothing), so a move retraces no
+    // more rays than it must. An overlay that changes nothing becomes empty.
+    void trim(const Heightmap& base) {
+        int i0 = patch.i1 + 1, i1 = patch.i0 - 1, j0 = patch.j1 + 1, j1 = patch.j0 - 1;
+        std::size_t k = 0;
+        for (int j = patch.j0; j <= patch.j1; ++j)
+            for (int i = patch.i0; i <= patch.i1; ++i, ++k)
+                if (heights[k] != base(i, j)) i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
+        if (i0 > i1) {
+            patch = Patch{};
+            normal_patch = Patch{};
+            heights.clear();
+            normals.clear();
+            return;
+        }
+        if (i0 == patch.i0 && i1 == patch.i1 && j0 == patch.j0 && j1 == patch.j1) return;
+        const Patch old = patch;
+        patch = Patch{i0, j0, i1, j1};
+        std::size_t out = 0;
+        for (int j = j0; j <= j1; ++j)
+            for (int i = i0; i <= i1; ++i)
+                heights[out++] = heights[std::size_t(j - old.j0) * old.width() + (i - old.i0)];
+        heights.resize(out);
+        finish(base);
     }
 
     float height(const Heightmap& base, int i, int j) const {

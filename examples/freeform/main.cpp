@@ -1,0 +1,471 @@
+// The `freeform` command line: render a scene, or design its surface.
+//
+//   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj] [--tracer T] [--threads N]
+//   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
+//
+// Bad input (a scene key, a file, an option) prints one line on stderr and exits with 2;
+// all input is read and checked before any output file is written.
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <freeform/design/designer.hpp>
+#include <freeform/io.hpp>
+#include <freeform/io/scene_file.hpp>
+#include <freeform/io/target.hpp>
+#include <freeform/objective/target.hpp>
+#include <freeform/scene/json.hpp>
+#include <freeform/surface/export.hpp>
+#include <freeform/surface/smooth.hpp>
+#include <freeform/trace/heightfield.hpp>
+#include <freeform/trace/select.hpp>
+#include <freeform/trace/setup.hpp>
+#if defined(FREEFORM_WITH_EMBREE)
+#include <freeform/trace/embree.hpp>
+#endif
+
+namespace fs = std::filesystem;
+using namespace freeform;
+using json = nlohmann::json;
+
+namespace {
+
+constexpr const char* version = "0.1.0";
+
+// Set by SIGINT; the design loop polls it and stops at the next iteration.
+std::atomic<bool> interrupted{false};
+extern "C" void on_sigint(int) { interrupted.store(true); }
+
+bool stderr_is_terminal() { return ::isatty(2) == 1; }
+
+// One self-overwriting status line on a terminal, at most ten updates a second.
+class StatusLine {
+public:
+    explicit StatusLine(bool enabled) : enabled_(enabled && stderr_is_terminal()) {}
+    ~StatusLine() { finish(); }
+    void show(const std::string& text, bool force = false) {
+        if (!enabled_) return;
+        const auto now = std::chrono::steady_clock::now();
+        if (!force && now - last_ < std::chrono::milliseconds(100)) return;
+        last_ = now;
+        std::fprintf(stderr, "\r\033[K%s", text.c_str());
+        std::fflush(stderr);
+        shown_ = true;
+    }
+    void finish() {
+        if (shown_) std::fprintf(stderr, "\n");
+        shown_ = false;
+    }
+
+private:
+    bool enabled_;
+    bool shown_ = false;
+    std::chrono::steady_clock::time_point last_{};
+};
+
+std::string bar(double fraction, int width = 30) {
+    const int filled = int(std::clamp(fraction, 0.0, 1.0) * width + 0.5);
+    return "[" + std::string(std::size_t(filled), '#') + std::string(std::size_t(width - filled), '.') + "]";
+}
+
+std::string fixed(double v, int digits) {
+    std::ostringstream s;
+    s.setf(std::ios::fixed);
+    s.precision(digits);
+    s << v;
+    return s.str();
+}
+
+TracerChoice parse_tracer(const std::string& s) {
+    if (s.empty() || s == "auto") return TracerChoice::automatic;
+    if (s == "heightfield") return TracerChoice::heightfield;
+    if (s == "embree") return TracerChoice::embree;
+    throw InputError("--tracer: must be one of auto, heightfield, embree; got '" + s + "'");
+}
+
+constexpr bool embree_built =
+#if defined(FREEFORM_WITH_EMBREE)
+    true;
+#else
+    false;
+#endif
+
+// The final mesh of a scene whose mesh is "auto": what the designer's plan ends with.
+std::pair<int, int> final_mesh(const Scene& scene, const ImageD* target) {
+    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
+    const auto levels = plan_levels(scene, target);
+    return {levels.back().mesh_x, levels.back().mesh_y};
+}
+
+// A heightmap from a PFM file, on the grid the file has.
+Heightmap heightmap_from_pfm(Scene scene, const fs::path& file) {
+    const ImageF img = io::read_pfm(file);
+    if (img.cols() < 2 || img.rows() < 2)
+        throw InputError("--heightmap: " + file.string() + " must be at least 2 x 2 pixels");
+    scene.surface.initial_pfm = file;
+    scene.surface.initial_paraboloid.reset();
+    return io::make_initial_heightmap(scene, int(img.cols()), int(img.rows()));
+}
+
+struct RenderOutcome {
+    Histogram histogram;
+    TraceTotals totals;
+    double seconds = 0;
+};
+
+// Traces all rays in chunks so that a long render can show a progress bar.
+template <class T>
+RenderOutcome render_with(const T& tracer, const RaySet& rays, int threads, StatusLine& status) {
+    const auto start = std::chrono::steady_clock::now();
+    const PathParams& pp = tracer.params();
+    RenderOutcome out{Histogram(pp.receiver.width, pp.receiver.height), {}, 0};
+    out.totals.emitted = rays.total;
+    const std::int64_t n = rays.size();
+    const int chunks = int(std::clamp<std::int64_t>(n / 65536, 1, 64));
+    std::vector<std::int32_t> ids;
+    std::vector<RayRecord> records;
+    for (int c = 0; c < chunks; ++c) {
+        const std::int64_t begin = n * c / chunks, end = n * (c + 1) / chunks;
+        ids.resize(std::size_t(end - begin));
+        for (std::int64_t k = begin; k < end; ++k) ids[std::size_t(k - begin)] = std::int32_t(k);
+        records.resize(ids.size());
+        tracer.trace(exec::omp_t{threads}, ids, records);
+        for (std::size_t k = 0; k < ids.size(); ++k) {
+            const Fixed w = rays.weight[std::size_t(ids[k])];
+            out.totals.add(records[k].status, w);
+            deposit_record(pp.receiver, records[k], w, out.histogram.cells);
+        }
+        const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        if (s > 1.0) status.show("tracing " + bar(double(c + 1) / chunks) + " " + std::to_string(end) + "/" +
+                                 std::to_string(n) + " rays");
+    }
+    status.finish();
+    out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return out;
+}
+
+json totals_json(const TraceTotals& t) {
+    const double n = double(t.emitted);
+    json j;
+    j["receiver"] = double(t.on_receiver()) / n;
+    j["missed_receiver"] = double(t.weight_by_status[std::size_t(RayStatus::missed_receiver)]) / n;
+    j["missed_surface"] = double(t.weight_by_status[std::size_t(RayStatus::missed_surface)]) / n;
+    j["total_internal_reflection"] = double(t.lost_tir()) / n;
+    j["max_depth"] = double(t.weight_by_status[std::size_t(RayStatus::lost_depth)]) / n;
+    j["absorbed"] = double(t.weight_by_status[std::size_t(RayStatus::absorbed)]) / n;
+    return j;
+}
+
+double l1_error(const Histogram& h, const Target& t) {
+    std::int64_t s = 0;
+    for (std::size_t k = 0; k < h.cells.size(); ++k) s += std::llabs(h.cells[k] - t.cells[k]);
+    return double(s) / (2.0 * double(t.total));
+}
+
+ImageD target_image_of(const Target& t) {
+    ImageD img(t.height, t.width);
+    for (int y = 0; y < t.height; ++y)
+        for (int x = 0; x < t.width; ++x) img(y, x) = from_fixed(t.cells[std::size_t(y) * t.width + x]);
+    return img;
+}
+
+// target | result | difference (blue: too little light, red: too much), same exposure.
+io::RgbImage comparison_image(const ImageD& result, const ImageD& target) {
+    const double peak = std::max(target.maxCoeff(), 1e-300);
+    const ImageF t = (target / peak).min(1.0).cast<float>();
+    const ImageF r = (result / peak).min(1.0).cast<float>();
+    const ImageD diff = result - target;
+    return io::hconcat({io::grey_to_rgb(t), io::grey_to_rgb(r), io::diverging(diff, peak)});
+}
+
+void write_json(const fs::path& file, const json& j) { io::write_file_atomically(file, j.dump(2) + "\n"); }
+
+// ---------------------------------------------------------------------------- render
+
+struct RenderArgs {
+    fs::path scene, out, heightmap, mesh;
+    std::string tracer;
+    int threads = 0;
+    std::optional<std::uint64_t> seed;
+};
+
+int run_render(const RenderArgs& a) {
+    Scene scene = io::load_scene(a.scene);
+    if (a.seed) scene.optimise.seed = *a.seed;
+    if (!a.heightmap.empty() && !a.mesh.empty())
+        throw InputError("--heightmap and --mesh are alternatives: give one of them");
+    const TracerChoice requested = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
+    const TracerDecision decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
+
+    std::optional<ImageD> target;
+    if (scene.target) target = io::load_target_image(scene);
+    Heightmap surface;
+    if (!a.heightmap.empty()) {
+        surface = heightmap_from_pfm(scene, a.heightmap);
+    } else {
+        const auto [nx, ny] = final_mesh(scene, target ? &*target : nullptr);
+        surface = io::make_initial_heightmap(scene, nx, ny);
+    }
+    std::optional<TriangleMesh> mesh;
+    if (!a.mesh.empty()) mesh = io::read_obj(a.mesh);
+    std::vector<TriangleMesh> extra;
+    for (const auto& m : scene.meshes) extra.push_back(io::read_obj(m.file));
+
+    const RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
+    const PathParams pp = make_path_params(scene);
+    const int threads = thread_count(exec::omp_t{a.threads});
+    StatusLine status(true);
+    RenderOutcome r;
+    if (decision.tracer == TracerChoice::heightfield) {
+        r = render_with(HeightfieldTracer(surface, rays, pp), rays, threads, status);
+    } else {
+#if defined(FREEFORM_WITH_EMBREE)
+        std::vector<ExtraMesh> extras;
+        for (std::size_t k = 0; k < extra.size(); ++k)
+            extras.push_back(to_surface_frame(extra[k], scene.surface.frame, scene.meshes[k].mirror));
+        if (mesh) {
+            const ExtraMesh local = to_surface_frame(*mesh, scene.surface.frame, true);
+            r = render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, status);
+        } else {
+            r = render_with(EmbreeTracer(surface, rays, pp, std::move(extras)), rays, threads, status);
+        }
+#endif
+    }
+
+    json m;
+    m["command"] = "render";
+    m["scene"] = a.scene.string();
+    m["tracer"] = tracer_name(decision.tracer);
+    m["tracer_reason"] = decision.reason;
+    m["threads"] = threads;
+    m["seed"] = scene.optimise.seed;
+    m["rays"] = rays.size();
+    m["rays_hit_receiver"] = r.totals.rays_hit_receiver;
+    m["energy"] = r.totals.energy();
+    m["where_light_went"] = totals_json(r.totals);
+    m["seconds"] = r.seconds;
+    m["rays_per_second"] = r.seconds > 0 ? double(rays.size()) / r.seconds : 0.0;
+    m["mesh"] = json::array({surface.nx(), surface.ny()});
+    m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
+    const ImageD irradiance = r.histogram.to_image();
+    std::optional<Target> t;
+    if (target) {
+        t = make_target(*target, scene.receiver.width, scene.receiver.height, rays.total);
+        m["error"] = l1_error(r.histogram, *t);
+    }
+    m["effective_scene"] = scene_to_json(scene);
+
+    fs::create_directories(a.out);
+    io::write_pfm(a.out / "irradiance.pfm", irradiance.cast<float>());
+    io::write_png(a.out / "irradiance.png", io::tone_map(irradiance));
+    if (t) io::write_png(a.out / "comparison.png", comparison_image(irradiance, target_image_of(*t)));
+    write_json(a.out / "metrics.json", m);
+    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(decision.tracer),
+                decision.reason.c_str());
+    std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
+                r.totals.energy(), t ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
+                m["rays_per_second"].get<double>() / 1e6);
+    std::printf("  results in %s/\n", a.out.string().c_str());
+    return 0;
+}
+
+// ---------------------------------------------------------------------------- design
+
+struct DesignArgs {
+    fs::path scene, out;
+    std::optional<std::uint64_t> seed;
+    std::optional<double> time_budget;
+    std::optional<int> threads;
+    bool quiet = false;
+};
+
+int run_design(const DesignArgs& a) {
+    Scene scene = io::load_scene(a.scene);
+    if (a.seed) scene.optimise.seed = *a.seed;
+    if (a.time_budget) {
+        if (!(*a.time_budget > 0)) throw InputError("--time-budget: must be > 0 seconds");
+        scene.optimise.time_budget = *a.time_budget;
+    }
+    if (a.threads) scene.optimise.threads = *a.threads;
+    if (!scene.target) throw InputError(a.scene.string() + ": target: a design needs a \"target\" block");
+    if (!scene.meshes.empty())
+        throw InputError(a.scene.string() +
+                         ": meshes: designing with extra meshes is not supported yet (render them with --tracer embree)");
+    const ImageD target = io::load_target_image(scene);
+    const auto [nx, ny] = final_mesh(scene, &target);
+    Heightmap initial = io::make_initial_heightmap(scene, nx, ny);
+    const DesignOptions& options = scene.optimise;
+
+    std::signal(SIGINT, on_sigint);
+    StatusLine status(!a.quiet);
+    if (!a.quiet)
+        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %.0f s budget, seed %llu\n", a.scene.string().c_str(),
+                    nx, ny, scene.receiver.width, scene.receiver.height, options.time_budget,
+                    (unsigned long long)options.seed);
+    DesignOptions run_options = options;
+    run_options.progress_every = 500;
+    DesignResult result = design(scene, std::move(initial), target, run_options, [&](const DesignProgress& p) {
+        status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
+                    std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
+                    fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
+                    fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) + " it/s | " +
+                    fixed(p.time_left, 1) + " s left");
+        return interrupted.load();
+    });
+    status.finish();
+    std::signal(SIGINT, SIG_DFL);
+    if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
+
+    // Final evaluation at the scene's full resolution, with the scene's seed.
+    const RaySet rays = generate_rays(scene.light, result.surface, scene.receiver, options.seed);
+    const PathParams pp = make_path_params(scene);
+    HeightfieldTracer tracer(result.surface, rays, pp);
+    Histogram hist(scene.receiver.width, scene.receiver.height);
+    TraceTotals totals;
+    tracer.trace_all(exec::omp_t{options.threads}, hist, totals);
+    const Target t = make_target(target, scene.receiver.width, scene.receiver.height, rays.total);
+    const double error = l1_error(hist, t);
+
+    json m;
+    m["command"] = "design";
+    m["scene"] = a.scene.string();
+    m["error"] = error;
+    m["energy"] = totals.energy();
+    m["objective"] = result.value.total;
+    m["iterations"] = result.iterations;
+    m["accepted"] = result.accepted;
+    m["seconds"] = result.seconds;
+    m["iterations_per_second"] = result.seconds > 0 ? double(result.iterations) / result.seconds : 0.0;
+    m["seed"] = options.seed;
+    m["tracer"] = "heightfield";
+    m["interrupted"] = result.stopped_early;
+    m["rays"] = rays.size();
+    m["mesh"] = json::array({result.surface.nx(), result.surface.ny()});
+    m["where_light_went"] = totals_json(totals);
+    json bank = json::array();
+    for (std::size_t k = 0; k < result.kernel_bank.size(); ++k) {
+        const auto& s = result.kernel_bank[k];
+        bank.push_back({{"sigma_x", s.sigma_x}, {"sigma_y", s.sigma_y}, {"rho", s.rho}, {"support", s.support},
+                        {"weight", k < result.bandit_weights.size() ? result.bandit_weights[k] : 0.0}});
+    }
+    m["bandit"] = options.bandit;
+    m["bandit_weights"] = result.bandit_weights;
+    m["kernels"] = bank;
+    json levels = json::array();
+    for (const auto& s : result.stages)
+        levels.push_back({{"level", s.level},
+                          {"mesh", json::array({s.mesh_x, s.mesh_y})},
+                          {"resolution", json::array({s.resolution_x, s.resolution_y})},
+                          {"kernel_support", s.kernel_support},
+                          {"rays", s.rays},
+                          {"iterations", s.iterations},
+                          {"accepted", s.accepted},
+                          {"seconds", s.seconds},
+                          {"initial_temperature", s.initial_temperature},
+                          {"error_start", s.error_start},
+                          {"error_end", s.error_end},
+                          {"energy_end", s.energy_end},
+                          {"stop", s.stop_reason},
+                          {"bandit_weights", s.bandit_weights}});
+    m["levels"] = levels;
+    m["effective_scene"] = scene_to_json(scene);
+
+    std::ostringstream csv;
+    csv << "seconds,iteration,level,stage,error,energy,objective,temperature\n";
+    for (const auto& c : result.convergence)
+        csv << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
+            << c.energy << ',' << c.objective << ',' << c.temperature << '\n';
+
+    const ImageD irradiance = hist.to_image();
+    const ImageD target_img = target_image_of(t);
+    const bool lens = is_lens(scene.surface.material);
+    const TriangleMesh fab = lens ? lens_solid(result.surface, std::get<Lens>(scene.surface.material),
+                                               float(scene.surface.phong_alpha), options.export_subdivisions)
+                                  : tessellate_surface(result.surface, float(scene.surface.phong_alpha),
+                                                       options.export_subdivisions);
+    ImageF heights(result.surface.ny(), result.surface.nx());
+    for (int j = 0; j < result.surface.ny(); ++j)
+        for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);
+
+    fs::create_directories(a.out);
+    write_json(a.out / "metrics.json", m);
+    io::write_file_atomically(a.out / "convergence.csv", csv.str());
+    io::write_pfm(a.out / "heightmap.pfm", heights);
+    io::write_pfm(a.out / "irradiance.pfm", irradiance.cast<float>());
+    io::write_png(a.out / "irradiance.png", io::tone_map(irradiance));
+    io::write_png(a.out / "target.png", io::tone_map(target_img));
+    io::write_png(a.out / "comparison.png", comparison_image(irradiance, target_img));
+    io::write_obj(a.out / "surface.obj", fab);
+    io::write_stl(a.out / "surface.stl", fab);
+    if (!a.quiet || true) {
+        std::printf("%s: error %.4f, energy %.4f after %lld iterations in %.1f s (%.0f it/s)%s\n",
+                    result.stopped_early ? "interrupted" : "done", error, totals.energy(),
+                    (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
+                    result.stopped_early ? " -- best result so far written" : "");
+        std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
+                    a.out.string().c_str());
+    }
+    return result.stopped_early ? 130 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"freeform: design freeform reflectors and lenses that throw a target image onto a plane.\n"
+                 "Scene files are described in docs/scene.md.",
+                 "freeform"};
+    app.set_version_flag("--version", version);
+    app.require_subcommand(1);
+
+    RenderArgs ra;
+    CLI::App* render = app.add_subcommand("render", "trace a scene's surface (or a heightmap / mesh) and write its irradiance");
+    render->add_option("scene", ra.scene, "scene file (JSON)")->required();
+    render->add_option("--out", ra.out, "output directory (irradiance.pfm/.png, metrics.json)")->required();
+    render->add_option("--heightmap", ra.heightmap, "trace this heightmap (PFM, surface frame heights in metres)");
+    render->add_option("--mesh", ra.mesh, "trace this triangle mesh (OBJ, world coordinates) in place of the surface");
+    render->add_option("--tracer", ra.tracer, "auto (default), heightfield or embree");
+    render->add_option("--threads", ra.threads, "worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)");
+
+    DesignArgs da;
+    CLI::App* design_cmd = app.add_subcommand("design", "optimise the surface so that its light matches the target");
+    design_cmd->add_option("scene", da.scene, "scene file (JSON) with a target")->required();
+    design_cmd->add_option("--out", da.out,
+                           "output directory (metrics.json, convergence.csv, heightmap.pfm, surface.obj/.stl, "
+                           "irradiance.png, target.png, comparison.png)")
+        ->required();
+    design_cmd->add_option("--seed", da.seed, "random seed (default: the scene's optimise.seed)");
+    design_cmd->add_option("--time-budget", da.time_budget, "seconds (default: the scene's optimise.time_budget)");
+    design_cmd->add_option("--threads", da.threads, "worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
+    app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
+               "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        const int code = app.exit(e);
+        return code == 0 ? 0 : 2;
+    }
+    try {
+        if (*render) return run_render(ra);
+        return run_design(da);
+    } catch (const InputError& e) {
+        std::fprintf(stderr, "freeform: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "freeform: internal error: %s\n", e.what());
+        return 1;
+    }
+}

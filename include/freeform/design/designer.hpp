@@ -1,0 +1,337 @@
+#pragma once
+// The end-to-end designer: a multi-level schedule of annealing runs (reference §4.4,
+// Algorithm 1) over mesh size × receiver resolution × kernel size.
+//
+// Levels pair a mesh with a receiver resolution, coarse to fine (each level doubles
+// both, as in the reference's Table 6.1); inside a level the kernel support shrinks
+// stage by stage (coarse shape first, then detail). Between levels the surface is
+// refined by bilinear interpolation. Each stage is one annealing run of the generic
+// annealer on a ReflectorProblem; its initial temperature is calibrated from the
+// objective changes of a few trial moves so that about `initial_acceptance` of uphill
+// moves are accepted at the start, which keeps the defaults meaningful for any scene.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "../anneal/annealer.hpp"
+#include "../objective/target.hpp"
+#include "../scene/rays.hpp"
+#include "../scene/scene.hpp"
+#include "../trace/setup.hpp"
+#include "problem.hpp"
+
+namespace freeform {
+
+// The designer's settings are the scene's "optimise" block (scene/scene.hpp).
+using DesignOptions = OptimiseSpec;
+
+// What a design reports at each progress call.
+struct DesignProgress {
+    int level = 0, levels = 0;
+    int stage = 0, stages = 0;
+    int mesh = 0, resolution = 0, kernel_support = 0;
+    std::int64_t iteration = 0;        // over the whole design
+    double temperature = 0;
+    double error = 0, energy = 0, objective = 0;
+    double iterations_per_second = 0;  // of the current stage
+    double seconds = 0, time_left = 0;
+};
+
+struct StageReport {
+    int level = 0, mesh_x = 0, mesh_y = 0, resolution_x = 0, resolution_y = 0, kernel_support = 0;
+    std::int64_t iterations = 0, accepted = 0, proposals_evaluated = 0;
+    double seconds = 0;
+    double initial_temperature = 0;
+    double error_start = 0, error_end = 0, energy_end = 0, objective_end = 0;
+    std::int64_t rays = 0;
+    std::vector<double> bandit_weights;
+    std::string stop_reason;
+};
+
+struct ConvergencePoint {
+    double seconds;
+    std::int64_t iteration;
+    int level, stage;
+    double error, energy, objective, temperature;
+};
+
+struct DesignResult {
+    Heightmap surface;         // final design (final mesh)
+    Histogram irradiance;      // at the final level's resolution
+    Target target;             // the final level's target
+    ObjectiveValue value;
+    std::int64_t iterations = 0;
+    std::int64_t accepted = 0;
+    double seconds = 0;
+    bool stopped_early = false;  // a callback stopped it (e.g. Ctrl-C): the best so far is kept
+    std::vector<StageReport> stages;
+    std::vector<ConvergencePoint> convergence;
+    std::vector<KernelShape> kernel_bank;  // of the last stage
+    std::vector<double> bandit_weights;    // of the last stage
+    std::int64_t rays = 0;
+};
+
+// How "photographic" a target is: the fraction of pixels with intermediate grey levels.
+inline double target_grey_fraction(const ImageD& img) {
+    const double mx = img.maxCoeff();
+    if (!(mx > 0)) return 0;
+    const auto mid = ((img > 0.1 * mx) && (img < 0.9 * mx)).cast<double>();
+    return mid.sum() / double(img.size());
+}
+
+// The default schedule for a scene: no more model than the case needs.
+//   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
+//   target: binary shapes get r/2 + 1 vertices along the longer side (r/4 + 1 below 64
+//   px, like the reference's 13² headlight for 50²), photographs 2r + 1 (the reference's
+//   401² for a 200² photo); the shorter side follows the surface's aspect ratio.
+//   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (the
+//   reference's 50² → 200² with 25² → 101²); one level when `multilevel` is off.
+//   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
+inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* target) {
+    const int rx = scene.receiver.width, ry = scene.receiver.height, r = std::max(rx, ry);
+    int mx = scene.surface.nx, my = scene.surface.ny;
+    if (mx <= 0 || my <= 0) {
+        const bool photo = target && target_grey_fraction(resample_area(*target, rx, ry)) > 0.25;
+        int mesh = photo ? 2 * r + 1 : (r < 64 ? r / 4 + 1 : r / 2 + 1);
+        mesh = std::max(5, mesh | 1);
+        const Vec2d size = scene.surface.size;
+        mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
+        my = size.x >= size.y ? std::max(3, int(std::lround((mesh - 1) * size.y / size.x)) + 1) : mesh;
+    }
+    const auto coarser = [](int m) { return std::max(3, 2 * ((m - 1) / 4) + 1); };  // about half: 101, 51, 25, 13, 7
+    std::vector<LevelPlan> levels;
+    int x = rx, y = ry;
+    while (true) {
+        LevelPlan l;
+        l.mesh_x = mx, l.mesh_y = my, l.resolution_x = x, l.resolution_y = y;
+        l.kernel_supports = kernel_support_levels(std::max(mx, my));
+        levels.insert(levels.begin(), l);
+        if (!scene.optimise.multilevel || levels.size() >= 3 || std::min(x, y) / 2 < 25 ||
+            coarser(std::max(mx, my)) < 7)
+            break;
+        mx = coarser(mx), my = coarser(my), x /= 2, y /= 2;
+    }
+    static const double shares[3][3] = {{1, 0, 0}, {0.35, 0.65, 0}, {0.15, 0.3, 0.55}};
+    for (std::size_t k = 0; k < levels.size(); ++k) {
+        levels[k].time_share = shares[levels.size() - 1][k];
+        levels[k].iterations = std::int64_t(40) * levels[k].mesh_x * levels[k].mesh_y;
+    }
+    return levels;
+}
+
+namespace design_detail {
+
+// Metres of kernel amplitude per receiver cell of light displacement per grid unit.
+inline double amplitude_unit(const Scene& scene, const Receiver& rec, const Heightmap& hm) {
+    const double cell = std::min(rec.size.x / rec.width, rec.size.y / rec.height);
+    const double distance = length(rec.frame.origin - scene.surface.frame.origin);
+    const double factor = is_lens(scene.surface.material)
+                              ? std::max(0.05, std::get<Lens>(scene.surface.material).ior - 1.0)
+                              : 2.0;
+    return cell * std::min(hm.du(), hm.dv()) / (factor * std::max(distance, 1e-6));
+}
+
+inline Penalties make_penalties(const DesignOptions& o) {
+    Penalties p;
+    p.add(HeightBoundTerm{}, o.height_bound_weight);
+    p.add(ValleyTerm{o.valley_min_angle}, o.valley_weight);
+    p.add(SmoothnessTerm{}, o.smoothness_weight);
+    return p;
+}
+
+inline ProposalSettings proposals_for(const DesignOptions& o, int support) {
+    ProposalSettings p;
+    p.single_vertex = o.single_vertex;
+    p.error_guided = o.error_guided;
+    p.max_shift_cells = o.max_shift_cells;
+    p.min_shift_cells = o.min_shift_cells;
+    if (!o.single_vertex) p.bank = default_kernel_bank(std::max(3, support | 1));
+    return p;
+}
+
+// Initial temperature such that a typical uphill move is accepted with probability p.
+inline double calibrate_temperature(ReflectorProblem& problem, std::uint64_t seed, double p) {
+    ReflectorProblem::Move m;
+    double sum = 0;
+    int up = 0;
+    for (int k = 0; k < 48; ++k) {
+        CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(k));
+        problem.propose(rng, 1.0, m);
+        const double d = problem.delta(m);
+        if (d > 0) sum += d, ++up;
+    }
+    const double mean_up = up > 0 ? sum / up : 1e-6;
+    return std::max(mean_up, 1e-12) / -std::log(std::clamp(p, 1e-6, 0.999));
+}
+
+}  // namespace design_detail
+
+// Designs the surface of `scene` so that its irradiance matches `target_image`
+// (relative irradiance, any resolution). `callback(const DesignProgress&)` is called
+// every options.progress_every iterations and may return true to stop (the best state
+// so far is kept); use a lambda returning bool, or a functor with that call operator.
+template <class Callback>
+DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
+                    Callback&& callback) {
+    using clock = std::chrono::steady_clock;
+    const auto t_start = clock::now();
+    const auto elapsed = [&] { return std::chrono::duration<double>(clock::now() - t_start).count(); };
+
+    Scene planned = scene;
+    planned.optimise = options;
+    std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned, &target_image) : options.levels;
+    for (auto& l : levels)
+        if (l.kernel_supports.empty()) l.kernel_supports = kernel_support_levels(std::max(l.mesh_x, l.mesh_y));
+    const Penalties penalties = design_detail::make_penalties(options);
+    const int threads = thread_count(exec::omp_t{options.threads});
+    DesignResult result;
+    std::int64_t total_iterations = 0;
+    double share_used = 0;
+    Heightmap surface = std::move(initial);
+    bool stop = false;
+
+    for (std::size_t li = 0; li < levels.size() && !stop; ++li) {
+        const LevelPlan& level = levels[li];
+        surface = surface.resampled(level.mesh_x, level.mesh_y);
+        Receiver receiver = scene.receiver;
+        receiver.width = level.resolution_x;
+        receiver.height = level.resolution_y;
+        const RaySet rays = generate_rays(scene.light, surface, receiver, options.seed);
+        Scene level_scene = scene;
+        level_scene.receiver = receiver;
+        const PathParams pp = make_path_params(level_scene);
+        const double unit = design_detail::amplitude_unit(scene, receiver, surface);
+
+        const std::size_t stages = level.kernel_supports.empty() ? 1 : level.kernel_supports.size();
+        const double level_share = level.time_share;
+        for (std::size_t si = 0; si < stages && !stop; ++si) {
+            const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
+            ProposalSettings ps = design_detail::proposals_for(options, support);
+            const int arms = std::max<int>(1, int(ps.bank.size()));
+            ReflectorProblem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+                                     ObjectiveWeights{options.sobel_weight, options.energy_threshold}, penalties, ps,
+                                     make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
+            const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
+            const double t0 = design_detail::calibrate_temperature(problem, stage_seed, options.initial_acceptance);
+            problem.set_reference_temperature(t0);
+
+            StageReport report;
+            report.level = int(li);
+            report.mesh_x = level.mesh_x;
+            report.mesh_y = level.mesh_y;
+            report.resolution_x = receiver.width;
+            report.resolution_y = receiver.height;
+            report.kernel_support = options.single_vertex ? 1 : support;
+            report.initial_temperature = t0;
+            report.error_start = problem.value().error;
+            report.rays = rays.size();
+
+            AnnealOptions ao;
+            ao.seed = stage_seed;
+            ao.initial_temperature = t0;
+            ao.cooling = options.cooling;
+            std::int64_t budget = std::max<std::int64_t>(1000, level.iterations / std::int64_t(stages));
+            if (options.max_iterations > 0) {
+                const std::int64_t left = options.max_iterations - total_iterations;
+                if (left <= 0) break;
+                budget = std::min(budget, std::max<std::int64_t>(1, left * std::int64_t(1) /
+                                                                        std::int64_t(stages - si)));
+            }
+            ao.max_iterations = budget;
+            ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
+            ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
+            ao.reheat_factor = options.reheat_factor;
+            // Time: this stage's share of what is left of this level's share.
+            const double level_end = options.time_budget * (share_used + level_share);
+            const double stage_time = std::max(0.05, (level_end - elapsed()) / double(stages - si));
+            ao.time_budget = options.time_budget > 0 ? stage_time : 0;
+            if (options.target_error > 0) ao.target_energy = options.target_error;
+            ao.speculative = options.speculative > 0 ? options.speculative : threads;
+            ao.threads = threads;
+            ao.progress_every = std::max<std::int64_t>(1, options.progress_every);
+
+            const auto stage_start = elapsed();
+            const std::int64_t base_iteration = total_iterations;
+            struct Hooks {
+                const DesignResult* result;
+                ReflectorProblem* problem;
+                std::vector<ConvergencePoint>* convergence;
+                Callback* user;
+                DesignProgress info;
+                std::int64_t base;
+                double stage_start;
+                const decltype(elapsed)* clock;
+                double budget;
+                bool stopped = false;
+                bool progress(const AnnealState& s) {
+                    const ObjectiveValue& v = problem->value();
+                    const double now = (*clock)();
+                    convergence->push_back({now, base + s.iteration, info.level, info.stage, v.error, v.energy, v.total,
+                                            s.temperature});
+                    info.iteration = base + s.iteration;
+                    info.temperature = s.temperature;
+                    info.error = v.error;
+                    info.energy = v.energy;
+                    info.objective = v.total;
+                    info.iterations_per_second = s.iterations_per_second;
+                    info.seconds = now;
+                    info.time_left = budget > 0 ? std::max(0.0, budget - now) : 0.0;
+                    if ((*user)(info)) stopped = true;
+                    return stopped;
+                }
+            };
+            Hooks hooks{&result, &problem, &result.convergence, &callback, {}, base_iteration, stage_start, &elapsed,
+                        options.time_budget};
+            hooks.info.level = int(li);
+            hooks.info.levels = int(levels.size());
+            hooks.info.stage = int(si);
+            hooks.info.stages = int(stages);
+            hooks.info.mesh = std::max(level.mesh_x, level.mesh_y);
+            hooks.info.resolution = std::max(receiver.width, receiver.height);
+            hooks.info.kernel_support = report.kernel_support;
+
+            const AnnealResult ar = anneal(problem, ao, hooks);
+            total_iterations += ar.iterations;
+            result.accepted += ar.accepted;
+            report.iterations = ar.iterations;
+            report.accepted = ar.accepted;
+            report.proposals_evaluated = ar.proposals_evaluated;
+            report.seconds = elapsed() - stage_start;
+            report.error_end = problem.value().error;
+            report.energy_end = problem.value().energy;
+            report.objective_end = problem.value().total;
+            report.bandit_weights = options.single_vertex ? std::vector<double>{} : problem.bandit().weights();
+            report.stop_reason = to_string(ar.reason);
+            result.stages.push_back(report);
+            stop = hooks.stopped || (options.target_error > 0 && problem.value().total <= options.target_error);
+            result.stopped_early = hooks.stopped;
+
+            const bool last = li + 1 == levels.size() && si + 1 == stages;
+            if (last || stop) {
+                result.irradiance = problem.histogram();
+                result.target = problem.image().target();
+                result.value = problem.value();
+                result.kernel_bank = ps.bank;
+                result.bandit_weights = report.bandit_weights;
+                result.rays = rays.size();
+            }
+        }
+        share_used += level_share;
+        if (stop && li + 1 < levels.size()) {
+            // Stopped early: the surface is at this level's mesh; refine to the final
+            // mesh so that exports have the size the user asked for, and re-evaluate.
+            surface = surface.resampled(levels.back().mesh_x, levels.back().mesh_y);
+        }
+    }
+    result.surface = std::move(surface);
+    result.iterations = total_iterations;
+    result.seconds = elapsed();
+    return result;
+}
+
+}  // namespace freeform

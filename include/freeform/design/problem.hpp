@@ -1,0 +1,217 @@
+#pragma once
+// The reflector / lens design problem, in the form the generic annealer expects
+// (anneal/annealer.hpp): energy(), propose(), delta(), accept(), reject().
+//
+// A move is a Gaussian kernel (picked by a bandit from a bank) added at a vertex, held in
+// an overlay; delta() retraces only the rays the move can affect (trace/incremental.hpp)
+// and returns the exact change of the objective; accept() commits heights, records and
+// sums; reject() only informs the bandit. delta() changes nothing visible, so several
+// proposals can be evaluated concurrently (speculative parallelism, DESIGN.md §4).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "../core/rng.hpp"
+#include "../objective/objective.hpp"
+#include "../propose/bandit.hpp"
+#include "../propose/kernel.hpp"
+#include "../propose/single_vertex.hpp"
+#include "../trace/incremental.hpp"
+
+namespace freeform {
+
+struct ProposalSettings {
+    std::vector<KernelShape> bank;  // the arms; empty with single_vertex
+    bool single_vertex = false;     // the plain baseline: move one vertex
+    bool error_guided = false;      // centres drawn where light lands in the wrong amount
+    // A move's amplitude is expressed as the displacement, in receiver cells, of the light
+    // reflected (or refracted) at the kernel's steepest point; drawn uniformly in
+    // [-s, s] with s = max_shift * sqrt(T / T_ref), never below min_shift.
+    double max_shift_cells = 4.0;
+    double min_shift_cells = 0.25;
+};
+
+class ReflectorProblem {
+public:
+    struct Move {
+        HeightOverlay overlay;
+        TraceChange change;
+        ImageScratch image_scratch;
+        ImageSums sums;              // image sums after the move
+        std::int64_t penalty_sum = 0;  // penalty sum after the move
+        int arm = -1;
+        bool noop = false;
+        double delta_value = 0;
+    };
+
+    // `metres_per_cell_shift`: the height amplitude that moves the light by one receiver
+    // cell per grid unit of kernel width (see design/designer.hpp). `reference_temperature`
+    // scales amplitudes with temperature.
+    ReflectorProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
+                     ObjectiveWeights weights, const Penalties& penalties, ProposalSettings proposals,
+                     AnyBandit bandit, double metres_per_cell_shift, double reference_temperature)
+        : surface_(&surface), rays_(&rays), trace_(surface, rays, params), image_(std::move(target)),
+          weights_(weights), penalties_(&penalties), proposals_(std::move(proposals)), bandit_(std::move(bandit)),
+          unit_(metres_per_cell_shift), t_ref_(reference_temperature) {
+        for (const auto& s : proposals_.bank) kernels_.emplace_back(s);
+        if (!proposals_.single_vertex && kernels_.empty())
+            throw InputError("optimise.kernels: the kernel bank is empty");
+        rebuild();
+    }
+
+    // Full recompute of every maintained quantity (level start, after restore_best).
+    void rebuild() {
+        const Histogram h = trace_.rebuild(exec::omp);
+        image_.reset(h);
+        penalty_sum_ = penalties_->full(*surface_);
+        value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
+        best_is_current_ = true;
+        best_value_ = value_.total;
+        refresh_error_weights();
+    }
+
+    double energy() const { return value_.total; }
+    const ObjectiveValue& value() const { return value_; }
+    const Heightmap& surface() const { return *surface_; }
+    const IncrementalTrace& trace() const { return trace_; }
+    const ImageState& image() const { return image_; }
+    const AnyBandit& bandit() const { return bandit_; }
+    void set_reference_temperature(double t) { t_ref_ = t; }
+
+    Histogram histogram() const { return trace_.histogram(); }
+
+    void propose(CounterRng& rng, double temperature, Move& m) {
+        const int nx = surface_->nx(), ny = surface_->ny();
+        int ci, cj;
+        choose_centre(rng, ci, cj);
+        const double shift = std::max(proposals_.min_shift_cells,
+                                      proposals_.max_shift_cells * std::sqrt(std::max(temperature, 0.0) / t_ref_));
+        const double s = rng.uniform(-1.0, 1.0) * shift;
+        if (proposals_.single_vertex) {
+            m.arm = -1;
+            apply_single_vertex(*surface_, ci, cj, float(s * unit_), m.overlay);
+        } else {
+            m.arm = bandit_.choose(rng);
+            const KernelShape& k = proposals_.bank[std::size_t(m.arm)];
+            // Slope of a Gaussian peaks at 0.6 amplitude / sigma: scale by the kernel's width.
+            const double width = std::sqrt(k.sigma_x * k.sigma_y) / 0.6;
+            apply_kernel(*surface_, kernels_[std::size_t(m.arm)], ci, cj, float(s * unit_ * width), m.overlay);
+        }
+        (void)nx, (void)ny;
+        m.overlay.trim(*surface_);
+        m.noop = m.overlay.empty();
+    }
+
+    double delta(Move& m) const {
+        if (m.noop) {
+            m.sums = image_.sums();
+            m.penalty_sum = penalty_sum_;
+            return m.delta_value = 0.0;
+        }
+        trace_.evaluate(m.overlay, m.change);
+        m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
+        m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
+        const ObjectiveValue after =
+            combine(m.sums, rays_->total, Penalties::value(m.penalty_sum, *surface_), weights_);
+        return m.delta_value = after.total - value_.total;
+    }
+
+    void accept(Move& m) {
+        if (m.arm >= 0) bandit_.update(m.arm, std::max(0.0, -m.delta_value));
+        if (m.noop) return;
+        // Leaving the best state uphill: keep a copy of it first (rare at low temperature).
+        if (best_is_current_ && m.delta_value > 0) {
+            best_heights_ = surface_->heights();
+            best_is_current_ = false;
+        }
+        m.overlay.commit(*surface_);
+        trace_.commit(m.change);
+        image_.apply(m.change.histogram, m.sums);
+        penalty_sum_ = m.penalty_sum;
+        value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
+    }
+
+    void reject(Move& m) {
+        if (m.arm >= 0) bandit_.update(m.arm, 0.0);
+    }
+
+    int sync_interval() const { return proposals_.single_vertex ? 1 << 30 : bandit_.sync_interval(); }
+    void sync() {
+        if (!proposals_.single_vertex) bandit_.sync();
+        refresh_error_weights();
+    }
+
+    void on_new_best() {
+        best_is_current_ = true;
+        best_value_ = value_.total;
+        best_heights_.clear();
+    }
+
+    // Puts the best state seen back in place (if the current one is worse).
+    void restore_best() {
+        if (best_is_current_ || best_heights_.empty()) return;
+        surface_->set_heights(best_heights_);
+        rebuild();
+    }
+
+private:
+    void choose_centre(CounterRng& rng, int& ci, int& cj) const {
+        const int nx = surface_->nx(), ny = surface_->ny();
+        if (proposals_.error_guided && max_error_ > 0) {
+            // Rejection sampling of rays in proportion to |R - T| where they land; the
+            // kernel goes where the ray was aimed at the surface.
+            for (int tries = 0; tries < 16; ++tries) {
+                const auto id = std::size_t(rng.below(std::uint64_t(rays_->size())));
+                const RayRecord& r = trace_.records()[id];
+                const double e = r.status == RayStatus::receiver ? cell_error(r) : max_error_;
+                if (rng.uniform() * max_error_ < e) {
+                    const Vec3 o = rays_->origin[id], d = rays_->direction[id];
+                    const float t = -o.z / d.z;
+                    const double u = o.x + t * d.x, v = o.y + t * d.y;
+                    ci = std::clamp(int(std::lround((u / surface_->size().x + 0.5) * (nx - 1))), 0, nx - 1);
+                    cj = std::clamp(int(std::lround((v / surface_->size().y + 0.5) * (ny - 1))), 0, ny - 1);
+                    return;
+                }
+            }
+        }
+        ci = int(rng.below(std::uint64_t(nx)));
+        cj = int(rng.below(std::uint64_t(ny)));
+    }
+
+    double cell_error(const RayRecord& r) const {
+        const int x = std::min(int(r.px), image_.width() - 1), y = std::min(int(r.py), image_.height() - 1);
+        return double(std::llabs(image_.difference(std::size_t(y) * image_.width() + x)));
+    }
+
+    // The largest cell error, refreshed at sync points only so that proposals drawn
+    // between syncs do not depend on outcomes not yet known.
+    void refresh_error_weights() {
+        if (!proposals_.error_guided) return;
+        Fixed m = 0;
+        for (int k = 0; k < image_.width() * image_.height(); ++k)
+            m = std::max(m, Fixed(std::llabs(image_.difference(std::size_t(k)))));
+        max_error_ = double(m);
+    }
+
+    Heightmap* surface_;
+    const RaySet* rays_;
+    IncrementalTrace trace_;
+    ImageState image_;
+    ObjectiveWeights weights_;
+    const Penalties* penalties_;
+    ProposalSettings proposals_;
+    std::vector<Kernel> kernels_;
+    AnyBandit bandit_;
+    double unit_;
+    double t_ref_;
+    ObjectiveValue value_;
+    std::int64_t penalty_sum_ = 0;
+    bool best_is_current_ = true;
+    double best_value_ = 0;
+    std::vector<float> best_heights_;
+    double max_error_ = 0;
+};
+
+}  // namespace freeform
