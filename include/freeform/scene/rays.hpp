@@ -106,8 +106,8 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
         for (const auto& p : pts) {
             const double t = top / -d.z;  // from the plane w = top down to w = 0
             const Vec3d o{p.u - t * d.x, p.v - t * d.y, top};
-            rays.origin.push_back(Vec3(o));
-            rays.direction.push_back(Vec3(d));
+            rays.origin.push_back(static_cast<Vec3>(o));
+            rays.direction.push_back(static_cast<Vec3>(d));
             w.push_back(1.0);
         }
     } else if (const auto* pl = std::get_if<PointLight>(&light.shape)) {
@@ -121,8 +121,8 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
             const double deg = std::acos(std::clamp(dot(d, axis), -1.0, 1.0)) * 180.0 / pi;
             const double weight = profile_intensity(pl->profile, deg) * (-d.z) * dA / r2;
             if (!(weight > 0)) continue;
-            rays.origin.push_back(Vec3(pos));
-            rays.direction.push_back(Vec3(d));
+            rays.origin.push_back(static_cast<Vec3>(pos));
+            rays.direction.push_back(static_cast<Vec3>(d));
             w.push_back(weight);
         }
     } else {
@@ -151,8 +151,8 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
             const double cos_src = dot(d, dn);
             const double weight = std::max(0.0, cos_src) * (-d.z) * dA * disk_area / r2;
             if (!(weight > 0)) continue;
-            rays.origin.push_back(Vec3(o));
-            rays.direction.push_back(Vec3(d));
+            rays.origin.push_back(static_cast<Vec3>(o));
+            rays.direction.push_back(static_cast<Vec3>(d));
             w.push_back(weight);
         }
     }

@@ -133,7 +133,7 @@ public:
         const int jl = j > 0 ? j - 1 : 0, jr = j < ny_ - 1 ? j + 1 : ny_ - 1;
         const double dhdu = (double(h(ir, j)) - double(h(il, j))) / ((ir - il) * du());
         const double dhdv = (double(h(i, jr)) - double(h(i, jl))) / ((jr - jl) * dv());
-        return Vec3(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
+        return static_cast<Vec3>(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
     }
 
     HeightSnapshot snapshot(const Patch& p) const {

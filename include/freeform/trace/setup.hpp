@@ -9,10 +9,10 @@ namespace freeform {
 
 inline ReceiverView make_receiver_view(const Receiver& r, const Frame& surface_frame) {
     ReceiverView v;
-    v.center = Vec3(surface_frame.to_local(r.frame.origin));
-    v.u = Vec3(surface_frame.dir_to_local(r.frame.u));
-    v.v = Vec3(surface_frame.dir_to_local(r.frame.v));
-    v.n = Vec3(surface_frame.dir_to_local(r.frame.w));
+    v.center = static_cast<Vec3>(surface_frame.to_local(r.frame.origin));
+    v.u = static_cast<Vec3>(surface_frame.dir_to_local(r.frame.u));
+    v.v = static_cast<Vec3>(surface_frame.dir_to_local(r.frame.v));
+    v.n = static_cast<Vec3>(surface_frame.dir_to_local(r.frame.w));
     v.inv_cell_u = float(r.width / r.size.x);
     v.inv_cell_v = float(r.height / r.size.y);
     v.width = r.width;
