@@ -95,8 +95,8 @@ TEST_CASE("a minimal scene gets every documented default") {
     CHECK(s.surface.frame.u == Vec3d{1, 0, 0});
     CHECK(s.surface.size.x == 0.1);
     CHECK(s.surface.size.y == 0.1);
-    CHECK(s.surface.nx == 101);
-    CHECK(s.surface.ny == 101);
+    CHECK(s.surface.nx == 0);  // "auto": chosen from the case by the designer
+    CHECK(s.surface.ny == 0);
     CHECK(s.surface.h_min == -0.005);
     CHECK(s.surface.h_max == 0.005);
     CHECK(s.surface.aperture == Aperture::rect);

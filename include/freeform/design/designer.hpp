@@ -84,6 +84,27 @@ inline double target_grey_fraction(const ImageD& img) {
     return mid.sum() / double(img.size());
 }
 
+// Kernel supports of level k (reference §4.4, multi-level Gaussian kernels). The first
+// level runs the whole sequence for its mesh, large to small. A finer level starts where
+// the previous one stopped, at the same physical size (twice the support on a mesh with
+// twice the vertices): larger kernels would redo the coarse shaping at a much higher
+// cost per move. The finest level ends with support 5, the smallest that is still a
+// smooth bump rather than a single-vertex spike.
+inline std::vector<int> level_kernel_supports(const std::vector<LevelPlan>& levels, std::size_t k) {
+    const int n = std::max(levels[k].mesh_x, levels[k].mesh_y);
+    std::vector<int> all = kernel_support_levels(n);
+    if (k == 0) return all;
+    const auto& prev = levels[k - 1].kernel_supports;
+    const int prev_smallest = prev.empty() ? 5 : prev.back();
+    const int largest = 2 * prev_smallest + 1;
+    std::vector<int> out;
+    for (int s : all)
+        if (s <= largest) out.push_back(s);
+    if (out.empty()) out.push_back(std::max(5, (largest - 2) | 1));
+    if (k + 1 == levels.size() && out.back() > 5) out.push_back(5);
+    return out;
+}
+
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
 //   target: binary shapes get r/2 + 1 vertices along the longer side (r/4 + 1 below 64
@@ -109,13 +130,13 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* targ
     while (true) {
         LevelPlan l;
         l.mesh_x = mx, l.mesh_y = my, l.resolution_x = x, l.resolution_y = y;
-        l.kernel_supports = kernel_support_levels(std::max(mx, my));
         levels.insert(levels.begin(), l);
         if (!scene.optimise.multilevel || levels.size() >= 3 || std::min(x, y) / 2 < 25 ||
             coarser(std::max(mx, my)) < 7)
             break;
         mx = coarser(mx), my = coarser(my), x /= 2, y /= 2;
     }
+    for (std::size_t k = 0; k < levels.size(); ++k) levels[k].kernel_supports = level_kernel_supports(levels, k);
     static const double shares[3][3] = {{1, 0, 0}, {0.35, 0.65, 0}, {0.15, 0.3, 0.55}};
     for (std::size_t k = 0; k < levels.size(); ++k) {
         levels[k].time_share = shares[levels.size() - 1][k];
@@ -185,8 +206,9 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
     Scene planned = scene;
     planned.optimise = options;
     std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned, &target_image) : options.levels;
-    for (auto& l : levels)
-        if (l.kernel_supports.empty()) l.kernel_supports = kernel_support_levels(std::max(l.mesh_x, l.mesh_y));
+    for (std::size_t k = 0; k < levels.size(); ++k)
+        if (levels[k].kernel_supports.empty())
+            levels[k].kernel_supports = level_kernel_supports(levels, k);
     const Penalties penalties = design_detail::make_penalties(options);
     const int threads = thread_count(exec::omp_t{options.threads});
     DesignResult result;

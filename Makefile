@@ -1,0 +1,69 @@
+# Entry points for people and CI. The real build is CMake (see CMakePresets.json).
+#   make demo           install dependencies, build, run the demo (results in results/demo)
+#   make test           release build + all tests
+#   make test-sanitize  AddressSanitizer/UBSan build + tests
+#   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
+JOBS ?= $(shell nproc)
+BUILD := build/release
+BIN := $(BUILD)/bin
+# Debian's python3 carries python3-matplotlib; a python3 earlier on PATH (pyenv, venv) may not.
+PYTHON ?= $(shell test -x /usr/bin/python3 && echo /usr/bin/python3 || echo python3)
+
+# The demo: change these two lines to change what `make demo` runs and where it writes.
+DEMO_OUT := results/demo
+DEMO_CMD = $(BIN)/freeform render examples/scenes/demo-paraboloid.json --out $(DEMO_OUT)
+
+SOURCE_DIRS := include tests examples benchmarks
+FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o -name '*.cuh' -o -name '*.cu' \) -type f 2>/dev/null)
+
+# Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.
+.NOTPARALLEL:
+
+.PHONY: all deps deps-bench configure build demo test test-sanitize bench clean format
+
+all: build
+
+deps:
+	@scripts/install-deps.sh
+
+deps-bench:
+	@scripts/install-deps.sh bench
+
+configure:
+	cmake --preset release
+
+build: configure
+	cmake --build --preset release --parallel $(JOBS)
+
+demo: deps build
+	@test -x $(BIN)/freeform || { echo "make demo: $(BIN)/freeform was not built (examples/freeform/ missing?)" >&2; exit 1; }
+	$(DEMO_CMD)
+	@echo "demo results are in $(DEMO_OUT)/"
+
+test: deps build
+	ctest --preset release
+
+test-sanitize: deps
+	cmake --preset sanitize
+	cmake --build --preset sanitize --parallel $(JOBS)
+	ctest --preset sanitize
+
+bench: deps deps-bench build
+	@mkdir -p benchmarks/results
+	@set -e; found=0; for exe in $(BIN)/bench_*; do \
+		[ -x "$$exe" ] || continue; found=1; \
+		name=$$(basename "$$exe"); name=$${name#bench_}; \
+		echo "== $$exe -> benchmarks/results/$$name.json"; \
+		"$$exe" --benchmark_out=benchmarks/results/$$name.json --benchmark_out_format=json; \
+	done; [ $$found = 1 ] || echo "make bench: no bench_* programs in $(BIN)"
+	@if [ -f benchmarks/study/run_study.py ]; then \
+		echo "== $(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick)"; \
+		$(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick); \
+	else echo "make bench: benchmarks/study/run_study.py not found, study skipped"; fi
+	@echo "benchmark results are in benchmarks/results/"
+
+clean:
+	rm -rf build
+
+format:
+	clang-format -i --style=file $(FORMAT_FILES)

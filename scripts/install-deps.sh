@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages freeform needs, and only those that are missing.
+#   scripts/install-deps.sh          build, test and demo dependencies
+#   scripts/install-deps.sh bench    also the optimisers the benchmark studies compare against
+# Silent when everything is already installed; safe to run any number of times.
+set -euo pipefail
+
+packages=(
+    make cmake ninja-build g++
+    libeigen3-dev libembree-dev doctest-dev libstb-dev libcli11-dev nlohmann-json3-dev
+    libbenchmark-dev libomp-dev
+    fonts-dejavu-core python3 python3-matplotlib
+)
+for arg in "$@"; do
+    case "$arg" in
+        bench) packages+=(libpagmo-dev libnlopt-cxx-dev) ;;
+        -h | --help)
+            sed -n '2,5p' "$0" | sed 's/^# \{0,1\}//'
+            exit 0
+            ;;
+        *)
+            echo "install-deps.sh: unknown argument '$arg' (expected: bench)" >&2
+            exit 2
+            ;;
+    esac
+done
+
+missing=()
+for p in "${packages[@]}"; do
+    status=$(dpkg-query -W -f='${db:Status-Status}' "$p" 2>/dev/null || true)
+    if [[ "$status" != "installed" ]]; then
+        missing+=("$p")
+    fi
+done
+if [[ ${#missing[@]} -eq 0 ]]; then
+    exit 0
+fi
+
+if [[ $(id -u) -eq 0 ]]; then
+    as_root=()
+elif command -v sudo >/dev/null 2>&1; then
+    as_root=(sudo)
+else
+    echo "install-deps.sh: missing packages: ${missing[*]}; run as root or install sudo" >&2
+    exit 1
+fi
+
+echo "install-deps.sh: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+"${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -q
+"${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"

@@ -1,0 +1,62 @@
+# ctest driver for the `consumer` test (cmake -P, so it works with any generator):
+#   1. installs the freeform build tree into a fresh prefix,
+#   2. configures tests/consumer against that prefix only,
+#   3. builds it and runs the program.
+#
+# Inputs (-D): FREEFORM_BUILD_DIR, FREEFORM_CONSUMER_SOURCE_DIR, FREEFORM_CONSUMER_WORK_DIR,
+# FREEFORM_CONFIG, FREEFORM_GENERATOR, FREEFORM_MAKE_PROGRAM, FREEFORM_CXX_COMPILER,
+# FREEFORM_EXPECT_EMBREE.
+cmake_minimum_required(VERSION 3.25)
+
+foreach(var IN ITEMS FREEFORM_BUILD_DIR FREEFORM_CONSUMER_SOURCE_DIR FREEFORM_CONSUMER_WORK_DIR FREEFORM_GENERATOR)
+  if(NOT DEFINED ${var} OR "${${var}}" STREQUAL "")
+    message(FATAL_ERROR "consumer test: ${var} is not set")
+  endif()
+endforeach()
+
+set(prefix "${FREEFORM_CONSUMER_WORK_DIR}/prefix")
+set(build "${FREEFORM_CONSUMER_WORK_DIR}/build")
+file(REMOVE_RECURSE "${FREEFORM_CONSUMER_WORK_DIR}")
+file(MAKE_DIRECTORY "${FREEFORM_CONSUMER_WORK_DIR}")
+
+function(run_step what)
+  message(STATUS "consumer test: ${what}: ${ARGN}")
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "consumer test: ${what} failed (${rc})")
+  endif()
+endfunction()
+
+set(config_args "")
+if(FREEFORM_CONFIG)
+  set(config_args --config "${FREEFORM_CONFIG}")
+endif()
+run_step("install" "${CMAKE_COMMAND}" --install "${FREEFORM_BUILD_DIR}" --prefix "${prefix}" ${config_args})
+
+foreach(f IN ITEMS include/freeform/trace/heightfield.hpp share/cmake/freeform/freeformConfig.cmake
+               share/cmake/freeform/freeformConfigVersion.cmake share/cmake/freeform/freeformTargets.cmake)
+  if(NOT EXISTS "${prefix}/${f}")
+    message(FATAL_ERROR "consumer test: the install is missing ${f}")
+  endif()
+endforeach()
+
+set(configure_args
+  -S "${FREEFORM_CONSUMER_SOURCE_DIR}" -B "${build}"
+  -G "${FREEFORM_GENERATOR}"
+  -DCMAKE_BUILD_TYPE=Release
+  "-DCMAKE_PREFIX_PATH=${prefix}"
+  "-DFREEFORM_EXPECTED_PREFIX=${prefix}"
+  "-DFREEFORM_EXPECT_EMBREE=${FREEFORM_EXPECT_EMBREE}"
+  # Only the fresh prefix may provide freeform: no package registries.
+  -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF
+  -DCMAKE_FIND_USE_SYSTEM_PACKAGE_REGISTRY=OFF)
+if(FREEFORM_MAKE_PROGRAM)
+  list(APPEND configure_args "-DCMAKE_MAKE_PROGRAM=${FREEFORM_MAKE_PROGRAM}")
+endif()
+if(FREEFORM_CXX_COMPILER)
+  list(APPEND configure_args "-DCMAKE_CXX_COMPILER=${FREEFORM_CXX_COMPILER}")
+endif()
+run_step("configure" "${CMAKE_COMMAND}" ${configure_args})
+run_step("build" "${CMAKE_COMMAND}" --build "${build}" --config Release)
+run_step("run" "${build}/bin/freeform_consumer")
+message(STATUS "consumer test: passed")
