@@ -242,8 +242,10 @@ struct Run {
 // A run with re-heats, sync points (for AdaptiveRastrigin), progress reports and a stall
 // rule, so that speculative windows are cut at every kind of point.
 template <class Problem>
-Run<Problem> trajectory_run(Problem problem, int speculative, int threads, std::int64_t iterations) {
+Run<Problem> trajectory_run(Problem problem, int speculative, int threads, std::int64_t iterations,
+                            bool adaptive = false) {
     AnnealOptions o = rastrigin_options(7);
+    o.adaptive_speculation = adaptive;
     o.max_iterations = iterations;
     o.iterations_per_temperature = 97;
     o.patience = 400;
@@ -309,6 +311,9 @@ void check_thread_and_window_independence(const Problem& start) {
         CAPTURE(speculative);
         check_same_trajectory(short_serial, trajectory_run(start, speculative, 2, 600));
     }
+    // Adaptive runs switch between serial and speculative windows as they measure
+    // which is faster; the trajectory must not notice.
+    check_same_trajectory(serial, trajectory_run(start, 4, 2, 6000, true));
 }
 
 }  // namespace

@@ -71,6 +71,7 @@
 #include <cstdint>
 #include <exception>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -81,6 +82,7 @@
 #include "../core/error.hpp"
 #include "../core/exec.hpp"
 #include "../core/rng.hpp"
+#include "../core/task_pool.hpp"
 #include "schedule.hpp"
 
 namespace freeform {
@@ -112,6 +114,9 @@ struct AnnealOptions {
     // evaluate their deltas (0 = OpenMP's default). Neither changes the result.
     int speculative = 1;
     int threads = 0;
+    // Measure serial against speculative windows during the run and use the faster
+    // (the trajectory is the same either way). Off: always windows of `speculative`.
+    bool adaptive_speculation = true;
 
     // Reporting: progress callbacks every progress_every iterations (0 = only at the end);
     // batch callbacks every batch_iterations when the problem has no sync points (0 = none).
@@ -333,7 +338,8 @@ public:
           moves_(static_cast<std::size_t>(options.speculative)),
           deltas_(static_cast<std::size_t>(options.speculative)),
           temperatures_(static_cast<std::size_t>(options.speculative)),
-          errors_(static_cast<std::size_t>(options.speculative)) {}
+          errors_(static_cast<std::size_t>(options.speculative)),
+          parallel_mode_(options.speculative > 1 && !options.adaptive_speculation) {}
 
     template <class... Cs>
     AnnealResult run(Cs&... callbacks) {
@@ -473,7 +479,7 @@ private:
     // The last iteration (exclusive) a window starting now may reach without passing a
     // point where the serial run would do something other than the next iteration.
     std::int64_t window_end() const {
-        std::int64_t end = iteration_ + options_.speculative;
+        std::int64_t end = iteration_ + (parallel_mode_ ? options_.speculative : 1);
         end = std::min({end, next_batch_, next_progress_});
         if (options_.max_iterations > 0) end = std::min(end, options_.max_iterations);
         if (options_.patience > 0) end = std::min(end, iteration_ + (options_.patience - since_reheat_));
@@ -496,9 +502,10 @@ private:
             for (int k = 0; k < count; ++k) deltas_[k] = static_cast<double>(cp.delta(moves_[k]));
             return;
         }
-        // An exception must not leave an OpenMP region; carry it out and rethrow the
-        // first in proposal order.
-        for_each(exec::omp_t{options_.threads}, count, [&](std::int64_t k) {
+        // Exceptions must not escape a worker; carry them out and rethrow the first in
+        // proposal order.
+        if (!pool_) pool_ = std::make_unique<TaskPool>(thread_count(exec::omp_t{options_.threads}));
+        pool_->run(count, [&](int k) {
             try {
                 deltas_[k] = static_cast<double>(cp.delta(moves_[k]));
             } catch (...) {
@@ -515,8 +522,41 @@ private:
 
     // Runs one window of iterations (one iteration when not speculative); true when a
     // callback asked to stop.
+    // Speculation pays only when a delta costs much more than waking the other threads,
+    // and not at all when the machine has no idle core for them. Since the trajectory is
+    // the same for every window size, the run measures both and keeps the faster: it
+    // probes serial windows now and then and compares iterations per second.
+    void adapt_window(std::int64_t iterations, double seconds) {
+        if (!options_.adaptive_speculation || options_.speculative <= 1 || options_.threads == 1) {
+            parallel_mode_ = options_.speculative > 1 && !options_.adaptive_speculation;
+            return;
+        }
+        Rate& r = parallel_mode_ ? parallel_rate_ : serial_rate_;
+        r.iterations += iterations;
+        r.seconds += seconds;
+        if (++mode_windows_ < (parallel_mode_ ? 128 : 64)) return;
+        mode_windows_ = 0;
+        if (probing_) {  // a period in the other mode just ended: keep the faster
+            probing_ = false;
+            parallel_mode_ = parallel_rate_.per_second() >= serial_rate_.per_second();
+        } else if (++periods_ % 16 == 1) {  // now and then, measure the other mode again
+            probing_ = true;
+            parallel_mode_ = !parallel_mode_;
+        }
+        (parallel_mode_ ? parallel_rate_ : serial_rate_) = {};
+    }
+
     template <class... Cs>
     bool step(Cs&... callbacks) {
+        const auto window_start = std::chrono::steady_clock::now();
+        const bool stop = step_window(callbacks...);
+        adapt_window(last_window_iterations_,
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - window_start).count());
+        return stop;
+    }
+
+    template <class... Cs>
+    bool step_window(Cs&... callbacks) {
         const std::int64_t first = iteration_;
         const std::int64_t end = window_end();
         int count = 0;
@@ -541,6 +581,7 @@ private:
             problem_.reject(moves_[k]);
         }
         const int done = taken >= 0 ? taken + 1 : count;
+        last_window_iterations_ = done;
         iteration_ = first + done;
         batch_iterations_ += done;
         // Every iteration but an accepted new best extends the run without improvement.
@@ -610,7 +651,18 @@ private:
     std::vector<double> deltas_;
     std::vector<double> temperatures_;
     std::vector<std::exception_ptr> errors_;
+    bool parallel_mode_;  // adaptive runs start serial; the first period probes speculative windows
 
+    struct Rate {
+        std::int64_t iterations = 0;
+        double seconds = 0;
+        double per_second() const { return seconds > 0 ? double(iterations) / seconds : 0.0; }
+    };
+    Rate parallel_rate_, serial_rate_;
+    bool probing_ = false;
+    std::int64_t mode_windows_ = 0, periods_ = 0, last_window_iterations_ = 0;
+
+    std::unique_ptr<TaskPool> pool_;  // started on the first parallel window
     std::chrono::steady_clock::time_point start_{};
     std::int64_t iteration_ = 0;
     std::int64_t accepted_ = 0;

@@ -175,19 +175,28 @@ inline ProposalSettings proposals_for(const DesignOptions& o, int support) {
     return p;
 }
 
-// Initial temperature such that a typical uphill move is accepted with probability p.
-inline double calibrate_temperature(ReflectorProblem& problem, std::uint64_t seed, double p) {
+struct Calibration {
+    double temperature = 0;       // initial temperature of the stage
+    double moves_per_second = 0;  // single-thread delta evaluations per second, measured
+};
+
+// Initial temperature such that a typical uphill move is accepted with probability p,
+// from a few trial moves (evaluated, never applied); their timing estimates the speed.
+inline Calibration calibrate(ReflectorProblem& problem, std::uint64_t seed, double p) {
     ReflectorProblem::Move m;
     double sum = 0;
     int up = 0;
-    for (int k = 0; k < 48; ++k) {
+    const auto start = std::chrono::steady_clock::now();
+    constexpr int trials = 48;
+    for (int k = 0; k < trials; ++k) {
         CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(k));
         problem.propose(rng, 1.0, m);
         const double d = problem.delta(m);
         if (d > 0) sum += d, ++up;
     }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double mean_up = up > 0 ? sum / up : 1e-6;
-    return std::max(mean_up, 1e-12) / -std::log(std::clamp(p, 1e-6, 0.999));
+    return {std::max(mean_up, 1e-12) / -std::log(std::clamp(p, 1e-6, 0.999)), trials / std::max(seconds, 1e-9)};
 }
 
 }  // namespace design_detail
@@ -223,7 +232,12 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
         Receiver receiver = scene.receiver;
         receiver.width = level.resolution_x;
         receiver.height = level.resolution_y;
-        const RaySet rays = generate_rays(scene.light, surface, receiver, options.seed);
+        // Coarse levels only shape the light roughly: fewer rays per cell make their moves
+        // cheaper without changing what they can see. The last level uses the light's own.
+        Light light = scene.light;
+        if (li + 1 < levels.size() && options.coarse_rays_per_cell > 0 && light.rays == 0)
+            light.rays_per_cell = std::min(light.rays_per_cell, options.coarse_rays_per_cell);
+        const RaySet rays = generate_rays(light, surface, receiver, options.seed);
         Scene level_scene = scene;
         level_scene.receiver = receiver;
         const PathParams pp = make_path_params(level_scene);
@@ -239,7 +253,8 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
                                      ObjectiveWeights{options.sobel_weight, options.energy_threshold}, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
-            const double t0 = design_detail::calibrate_temperature(problem, stage_seed, options.initial_acceptance);
+            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance);
+            const double t0 = cal.temperature;
             problem.set_reference_temperature(t0);
 
             StageReport report;
@@ -257,23 +272,30 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
             ao.seed = stage_seed;
             ao.initial_temperature = t0;
             ao.cooling = options.cooling;
+            // Time: this stage's share of what is left of this level's share.
+            const double level_end = options.time_budget * (share_used + level_share);
+            const double stage_time = std::max(0.05, (level_end - elapsed()) / double(stages - si));
+            const int speculative = options.speculative > 0 ? options.speculative : threads;
+            // Iteration budget: with a time budget and no iteration cap, as many iterations
+            // as the measured speed fits in the stage's time (so that the temperature
+            // schedule completes); otherwise the plan's, which makes the run reproducible.
             std::int64_t budget = std::max<std::int64_t>(1000, level.iterations / std::int64_t(stages));
+            if (options.time_budget > 0 && options.max_iterations == 0) {
+                const double parallel = 1.0 + 0.6 * (std::min(speculative, threads) - 1);
+                budget = std::max<std::int64_t>(500, std::int64_t(0.9 * cal.moves_per_second * parallel * stage_time));
+            }
             if (options.max_iterations > 0) {
                 const std::int64_t left = options.max_iterations - total_iterations;
                 if (left <= 0) break;
-                budget = std::min(budget, std::max<std::int64_t>(1, left * std::int64_t(1) /
-                                                                        std::int64_t(stages - si)));
+                budget = std::min(budget, std::max<std::int64_t>(1, left / std::int64_t(stages - si)));
             }
             ao.max_iterations = budget;
             ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
             ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
             ao.reheat_factor = options.reheat_factor;
-            // Time: this stage's share of what is left of this level's share.
-            const double level_end = options.time_budget * (share_used + level_share);
-            const double stage_time = std::max(0.05, (level_end - elapsed()) / double(stages - si));
             ao.time_budget = options.time_budget > 0 ? stage_time : 0;
             if (options.target_error > 0) ao.target_energy = options.target_error;
-            ao.speculative = options.speculative > 0 ? options.speculative : threads;
+            ao.speculative = speculative;
             ao.threads = threads;
             ao.progress_every = std::max<std::int64_t>(1, options.progress_every);
 

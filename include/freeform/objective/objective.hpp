@@ -4,7 +4,7 @@
 // recompute agree bit for bit.
 //
 //   error    = sum |R - T| / 2N                      (reference eq. 3.3; 0 = identical, 1 = disjoint)
-//   image    = error + sobel_weight * sum |Sobel(R - T)| / 2N        (eq. 4.5)
+//   image    = error + sobel_weight * sum |Sobel(R - T)| / 8 / 2N    (eq. 4.5)
 //   energy   = weight on the receiver / N
 //   total    = image / energy if energy < threshold else image       (eq. 4.4)
 //              + mean weighted penalty per vertex
@@ -24,7 +24,7 @@ struct ObjectiveWeights {
 
 struct ObjectiveValue {
     double error = 0;    // the L1 error alone (what the reference and our reports call "error")
-    double sobel = 0;    // sum |Sobel(R - T)| / 2N
+    double sobel = 0;    // sum |Sobel(R - T)| / 8 / 2N: the gradient error, in the units of `error`
     double energy = 0;   // fraction of N on the receiver
     double penalty = 0;  // mean weighted penalty per vertex
     double total = 0;    // what the annealer minimises
@@ -34,7 +34,9 @@ inline ObjectiveValue combine(const ImageSums& s, Fixed n, double penalty, const
     ObjectiveValue v;
     const double two_n = 2.0 * double(n);
     v.error = double(s.l1) / two_n;
-    v.sobel = double(s.sobel) / two_n;
+    // The 3 x 3 Sobel stencils weigh a unit step by up to 8 (1+2+1 on each side): dividing
+    // by 8 makes them a per-cell gradient estimate, so sobel_weight compares like with like.
+    v.sobel = double(s.sobel) / (8.0 * two_n);
     v.energy = double(s.on_receiver) / double(n);
     v.penalty = penalty;
     double image = v.error + w.sobel * v.sobel;

@@ -72,6 +72,7 @@ struct OptimiseSpec {
     int speculative = 0;              // proposals evaluated at once; 0: one per thread
     std::vector<LevelPlan> levels;    // empty: planned from the case
     bool multilevel = true;           // false: only the final level
+    double coarse_rays_per_cell = 4;  // rays per receiver cell on levels before the last; 0: the light's
 
     // Objective.
     double sobel_weight = 0.1;
@@ -90,7 +91,7 @@ struct OptimiseSpec {
     double min_shift_cells = 0.25;
 
     // Annealing schedule.
-    double initial_acceptance = 0.3;  // of uphill moves at the start of each stage
+    double initial_acceptance = 0.1;  // of uphill moves at the start of each stage
     double cooling = 0.95;
     int temperature_steps = 120;      // cooling steps per stage
     double reheat_factor = 0.5;

@@ -11,7 +11,18 @@
 
 #include "../core/hd.hpp"
 #include "../surface/heightmap.hpp"
+#include "../surface/overlay.hpp"
 #include "path.hpp"
+
+// Small hot helpers of the walk that must be inlined: at -O2 GCC's size heuristics keep
+// them out of line, and passing a dozen floats costs more than they compute.
+#if defined(__CUDACC__)
+#define FREEFORM_HF_INLINE __forceinline__
+#elif defined(__GNUC__)
+#define FREEFORM_HF_INLINE inline __attribute__((always_inline))
+#else
+#define FREEFORM_HF_INLINE inline
+#endif
 
 namespace freeform {
 
@@ -51,137 +62,313 @@ FREEFORM_HD inline void fill_hit_vertices(const View& hf, SurfaceHit& hit) {
     }
 }
 
+namespace hf_detail {
+
+// What the walk needs of a view that does not change along a ray's path: computed once
+// per ray, not once per segment.
+struct Grid {
+    float x_max = 0, y_max = 0;    // the grid rectangle in grid units: [0, x_max] x [0, y_max]
+    float inv_du = 1, inv_dv = 1;  // grid units per metre
+    int last_ci = 0, last_cj = 0;  // index of the last cell along u and v
+    int row = 0;                   // cells per row
+    float z_pad = 0;               // the cell culling's allowance for rounding (metres)
+};
+
+template <class View>
+FREEFORM_HD inline Grid grid_of(const View& hf) {
+    Grid g;
+    g.x_max = float(hf.nx - 1);
+    g.y_max = float(hf.ny - 1);
+    g.inv_du = 1.0f / hf.du;
+    g.inv_dv = 1.0f / hf.dv;
+    g.last_ci = hf.nx - 2;
+    g.last_cj = hf.ny - 2;
+    g.row = hf.nx - 1;
+    // A few float roundings of the heights themselves, and a little of the slab.
+    g.z_pad = 1e-5f * (hf.h_max - hf.h_min) + 1e-6f * max_f(fabsf(hf.h_min), fabsf(hf.h_max));
+    return g;
+}
+
+// The four corner heights of a cell.
+struct Corners {
+    float h00, h10, h01, h11;
+};
+
+template <class View>
+FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const View& hf, int ci, int cj) {
+    return {hf.height(ci, cj), hf.height(ci + 1, cj), hf.height(ci, cj + 1), hf.height(ci + 1, cj + 1)};
+}
+FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const HeightfieldView& hf, int ci, int cj) {
+    const float* p = hf.h + (cj * hf.nx + ci);
+    return {p[0], p[1], p[hf.nx], p[hf.nx + 1]};
+}
+// One range test for the cell's 2 x 2 vertices instead of one per vertex. The rays an
+// evaluation retraces are those crossing the move, so cells wholly inside the overlay
+// are as common as cells wholly outside it.
+FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const OverlayView& hf, int ci, int cj) {
+    // Cell (ci, cj) spans vertices a..a+1 and b..b+1 of the overlay (unsigned: below it wraps).
+    const unsigned a = unsigned(ci - hf.pi0), b = unsigned(cj - hf.pj0);
+    if (a + 1u <= unsigned(hf.pw) && b + 1u <= unsigned(hf.ph)) {  // touches the overlay
+        if (a < unsigned(hf.pw - 1) && b < unsigned(hf.ph - 1)) {  // and lies inside it
+            const float* p = hf.oh + (b * unsigned(hf.pw) + a);
+            return {p[0], p[1], p[hf.pw], p[hf.pw + 1]};
+        }
+        return {hf.height(ci, cj), hf.height(ci + 1, cj), hf.height(ci, cj + 1), hf.height(ci + 1, cj + 1)};
+    }
+    return corners(static_cast<const HeightfieldView&>(hf), ci, cj);
+}
+
+// The normals of triangle k of cell (ci, cj): vertices (ci, cj), (ci + 1, cj + k) and
+// (ci + 1 - k, cj + 1).
+template <class View>
+FREEFORM_HD FREEFORM_HF_INLINE void triangle_normals(const View& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
+    n[0] = hf.normal(ci, cj);
+    n[1] = hf.normal(ci + 1, cj + k);
+    n[2] = hf.normal(ci + 1 - k, cj + 1);
+}
+FREEFORM_HD FREEFORM_HF_INLINE void triangle_normals(const OverlayView& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
+    const unsigned a = unsigned(ci - hf.ni0), b = unsigned(cj - hf.nj0);  // below: wraps
+    const unsigned aw = unsigned(hf.nw > 0 ? hf.nw - 1 : 0), bh = unsigned(hf.nh > 0 ? hf.nh - 1 : 0);
+    if (a < aw && b < bh) {  // the cell's four vertices all lie in the overlay
+        const Vec3* p = hf.on + (b * unsigned(hf.nw) + a);
+        n[0] = p[0];
+        n[1] = p[1 + k * hf.nw];
+        n[2] = p[1 - k + hf.nw];
+    } else {
+        n[0] = hf.normal(ci, cj);
+        n[1] = hf.normal(ci + 1, cj + k);
+        n[2] = hf.normal(ci + 1 - k, cj + 1);
+    }
+}
+
+// Writes the hit on triangle k of cell (ci, cj) at cell-local (a, b) into `hit`.
+// Triangle 0 is (v00, v10, v11) with weights (1-a, a-b, b), triangle 1 is
+// (v00, v11, v01) with weights (1-b, a, b-a); written as selects on k, not branches
+// (which triangle is hit is a coin toss to the branch predictor).
+template <class View>
+FREEFORM_HD FREEFORM_HF_INLINE void set_hit(const View& hf, const Grid& g, const Corners& c, int ci, int cj, int k,
+                                            float t, float a, float b, SurfaceHit& hit) {
+    hit.kind = HitKind::surface;
+    hit.t = t;
+    hit.tri = 2 * (cj * g.row + ci) + k;
+    a = min_f(max_f(a, 0.0f), 1.0f), b = min_f(max_f(b, 0.0f), 1.0f);
+    const float hi = k == 0 ? a : b, lo = min_f(k == 0 ? b : a, hi);
+    hit.b0 = 1.0f - hi;
+    hit.b1 = k == 0 ? hi - lo : lo;
+    hit.b2 = k == 0 ? lo : hi - lo;
+    // Vertex positions exactly as View::vertex computes them.
+    const float x0 = hf.u0 + float(ci) * hf.du, x1 = hf.u0 + float(ci + 1) * hf.du;
+    const float y0 = hf.v0 + float(cj) * hf.dv, y1 = hf.v0 + float(cj + 1) * hf.dv;
+    hit.p[0] = Vec3{x0, y0, c.h00};
+    hit.p[1] = Vec3{x1, k == 0 ? y0 : y1, k == 0 ? c.h10 : c.h11};
+    hit.p[2] = Vec3{k == 0 ? x1 : x0, y1, k == 0 ? c.h11 : c.h01};
+    triangle_normals(hf, ci, cj, k, hit.n);
+}
+
+// Triangle k of a cell with corner heights c against the cell-local ray
+// (ao + ad t, bo + bd t, ez + dz t): the t of an admissible hit (t >= t_min, inside the
+// triangle up to eps, seen from the wanted side), or infinity. (a, b) receives the
+// cell-local hit point.
+template <bool Front>
+FREEFORM_HD FREEFORM_HF_INLINE float triangle_t(int k, const Corners& c, float ao, float bo, float ez, float ad,
+                                                float bd, float dz, float t_min, float& a, float& b) {
+    // Plane z = h00 + A a + B b; denom = d · (-A/du, -B/dv, 1) is negative when the ray
+    // meets the front.
+    const float A = k == 0 ? c.h10 - c.h00 : c.h11 - c.h01;
+    const float B = k == 0 ? c.h11 - c.h10 : c.h01 - c.h00;
+    const float den = dz - A * ad - B * bd;
+    if (!(Front ? den < 0.0f : den > 0.0f)) return INFINITY;
+    const float t = (c.h00 + A * ao + B * bo - ez) / den;
+    a = ao + ad * t, b = bo + bd * t;
+    constexpr float eps = 1e-5f;  // tolerance in cell units: no cracks between cells
+    // Triangle 0 is b <= a, triangle 1 is a <= b; swapping (a, b) maps one onto the other.
+    const float lo = k == 0 ? b : a, hi = k == 0 ? a : b;
+    const bool inside = (lo >= -eps) & (hi <= 1.0f + eps) & (lo <= hi + eps) & (t >= t_min);
+    return inside ? t : INFINITY;
+}
+
+// Distance (in cell units) from the diagonal within which a walk may meet either
+// triangle of a cell. Far above the rounding of the walk (about 1e-5 cells after
+// hundreds of cells), far below a cell.
+inline constexpr float diagonal_margin = 1e-3f;
+
+// Clips a ray that enters the slab outside the grid rectangle to the rectangle:
+// narrows [t0, t1] and moves (gx, gy) to the entry. Rays from the side of the grid and
+// rays that miss it take this path; everything else starts inside.
+FREEFORM_HD inline bool clip_to_grid(const Grid& g, float gox, float goy, float ad, float bd, float& t0, float& t1,
+                                     float& gx, float& gy) {
+    if (fabsf(ad) > 1e-30f) {  // the walk's threshold for an axis that moves
+        const float r = 1.0f / ad;
+        const float ta = -gox * r, tb = (g.x_max - gox) * r;
+        t0 = max_f(t0, min_f(ta, tb));
+        t1 = min_f(t1, max_f(ta, tb));
+    } else if (!(gox >= 0.0f && gox <= g.x_max)) {
+        return false;
+    }
+    if (fabsf(bd) > 1e-30f) {
+        const float r = 1.0f / bd;
+        const float ta = -goy * r, tb = (g.y_max - goy) * r;
+        t0 = max_f(t0, min_f(ta, tb));
+        t1 = min_f(t1, max_f(ta, tb));
+    } else if (!(goy >= 0.0f && goy <= g.y_max)) {
+        return false;
+    }
+    if (!(t0 <= t1)) return false;
+    gx = gox + ad * t0, gy = goy + bd * t0;
+    return true;
+}
+
+// The segment's walk over one cell: tests the cell's triangles for the nearest admissible
+// hit. The segment is the cell-local ray (ao + ad t, bo + bd t, ez + dz t) for t from tc
+// to tc_end; t0 is where the segment starts on the ray.
+template <bool Front, class View>
+FREEFORM_HD FREEFORM_HF_INLINE bool cell_hit(const View& hf, const Grid& g, int ci, int cj, float gx, float gy,
+                                             float ez, float ad, float bd, float dz, float tc, float tc_end, float t0,
+                                             std::int32_t exclude, SurfaceHit& hit) {
+    if (!hf.cell_active(ci, cj)) return false;
+    const Corners c = corners(hf, ci, cj);
+    const float z0 = ez + tc * dz, z1 = ez + tc_end * dz;
+    const float hlo = min_f(min_f(c.h00, c.h10), min_f(c.h01, c.h11));
+    const float hhi = max_f(max_f(c.h00, c.h10), max_f(c.h01, c.h11));
+    if (!(min_f(z0, z1) <= hhi + g.z_pad && max_f(z0, z1) >= hlo - g.z_pad)) return false;
+    const float ao = gx - float(ci), bo = gy - float(cj);  // cell-local start
+    const std::int32_t base = 2 * (cj * g.row + ci);
+    // Hits a rounding error before the segment start still count when they lie in front
+    // of the origin (the ray cannot meet the surface outside the slab).
+    const float t_min = -t0;
+    // Side of the diagonal (a - b) where the walk enters and leaves the cell: the
+    // triangle under the middle of the walk is tested first, the other one only when the
+    // walk comes near the diagonal.
+    const float sa = ao - bo, sd = ad - bd;
+    const float s0 = sa + sd * tc, s1 = sa + sd * tc_end;
+    int k = s0 + s1 < 0.0f ? 1 : 0;
+    float a = 0, b = 0;
+    float t = base + k != exclude ? triangle_t<Front>(k, c, ao, bo, ez, ad, bd, dz, t_min, a, b) : INFINITY;
+    if (min_f(s0, s1) < diagonal_margin && max_f(s0, s1) > -diagonal_margin) {
+        const int k2 = 1 - k;
+        float a2 = 0, b2 = 0;
+        const float t2 =
+            base + k2 != exclude ? triangle_t<Front>(k2, c, ao, bo, ez, ad, bd, dz, t_min, a2, b2) : INFINITY;
+        if (t2 < t || (t2 == t && k2 == 0)) t = t2, a = a2, b = b2, k = k2;
+    }
+    if (t == INFINITY) return false;
+    set_hit(hf, g, c, ci, cj, k, t0 + t, a, b, hit);
+    return true;
+}
+
+// The nearest admissible hit of the segment (o, d) on the front (Front) or back side:
+// sets `hit` (kind surface) and returns true, or returns false and leaves `hit` alone.
+//
+// The walk runs in grid units (x = (u - u0)/du, y = (v - v0)/dv, the grid is
+// [0, nx-1] x [0, ny-1]). The segment is the ray inside the slab; it leaves the grid
+// when the walk steps off it. A segment that stays over one cell (light arriving
+// steeply, light leaving a mirror steeply) is tested without setting up the walk. Cell
+// crossings are multiplications by the reciprocal direction, recomputed from the grid
+// line rather than accumulated, so that long walks do not drift.
+template <bool Front, class View, class Visitor>
+FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std::int32_t exclude, Visitor& visit,
+                             SurfaceHit& hit) {
+    const float inf = INFINITY;
+    // Slab interval.
+    float t0 = 0.0f, t1 = inf;
+    if (d.z != 0.0f) {
+        const float r = 1.0f / d.z;
+        const float ta = (hf.h_min - o.z) * r, tb = (hf.h_max - o.z) * r;
+        t0 = max_f(0.0f, min_f(ta, tb));
+        t1 = max_f(ta, tb);
+        if (!(t0 <= t1)) return false;
+    } else if (!(o.z >= hf.h_min && o.z <= hf.h_max)) {
+        return false;
+    }
+    const float ad = d.x * g.inv_du, bd = d.y * g.inv_dv;  // grid units per unit t
+    const float gox = (o.x - hf.u0) * g.inv_du, goy = (o.y - hf.v0) * g.inv_dv;
+    // Re-base the ray at the start of the segment so that cell-local arithmetic stays small.
+    float gx = gox + ad * t0, gy = goy + bd * t0;
+    if (!(gx >= 0.0f && gx <= g.x_max && gy >= 0.0f && gy <= g.y_max) &&
+        !clip_to_grid(g, gox, goy, ad, bd, t0, t1, gx, gy))
+        return false;
+    const float ez = o.z + d.z * t0;
+    const float t_len = t1 - t0;
+    // gx, gy >= 0 here: truncation is floor.
+    int ci = int(gx), cj = int(gy);
+    ci = ci > g.last_ci ? g.last_ci : ci;
+    cj = cj > g.last_cj ? g.last_cj : cj;
+    {
+        const float fi = float(ci), fj = float(cj);
+        const float ex = gx + ad * t_len, ey = gy + bd * t_len;  // end of the segment
+        if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) {
+            visit(ci, cj);
+            return cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, 0.0f, t_len, t0, exclude, hit);
+        }
+    }
+    // Next grid line on each axis and the t (from the segment start) of crossing it; an
+    // axis that does not move (1e-30: no 0 * inf below) never crosses one.
+    const int step_i = ad > 0.0f ? 1 : -1, step_j = bd > 0.0f ? 1 : -1;
+    const float ra = fabsf(ad) > 1e-30f ? 1.0f / ad : 0.0f, rb = fabsf(bd) > 1e-30f ? 1.0f / bd : 0.0f;
+    float line_i = float(ci + (ad > 0.0f ? 1 : 0)), line_j = float(cj + (bd > 0.0f ? 1 : 0));
+    float tn_i = ra != 0.0f ? (line_i - gx) * ra : inf;
+    float tn_j = rb != 0.0f ? (line_j - gy) * rb : inf;
+    float tc = 0.0f;
+    while (true) {
+        const float tn = min_f(tn_i, tn_j);
+        visit(ci, cj);
+        if (cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, tc, min_f(tn, t_len), t0, exclude, hit))
+            return true;
+        if (tn >= t_len) return false;
+        if (tn_i < tn_j) {
+            ci += step_i;
+            if (ci < 0 || ci > g.last_ci) return false;
+            tc = tn_i;
+            line_i += float(step_i);
+            tn_i = (line_i - gx) * ra;
+        } else {
+            cj += step_j;
+            if (cj < 0 || cj > g.last_cj) return false;
+            tc = tn_j;
+            line_j += float(step_j);
+            tn_j = (line_j - gy) * rb;
+        }
+    }
+}
+
+template <class View, class Visitor>
+FREEFORM_HD inline bool nearest_hit(const View& hf, const Grid& g, Vec3 o, Vec3 d, std::int32_t exclude, bool front,
+                                    Visitor& visit, SurfaceHit& hit) {
+    return front ? walk<true>(hf, g, o, d, exclude, visit, hit) : walk<false>(hf, g, o, d, exclude, visit, hit);
+}
+
+}  // namespace hf_detail
+
 // Finds the nearest hit of the ray (o, d) with the height field, ignoring triangle
 // `exclude` and triangles seen from the wrong side (front: from +w). `visit(ci, cj)` is
 // called for every cell the segment crosses inside the slab, up to and including the
 // cell of the hit. `View` is HeightfieldView or OverlayView (surface/overlay.hpp).
 template <class View, class Visitor>
-FREEFORM_HD inline SurfaceHit find_heightfield_hit(const View& hf, Vec3 o, Vec3 d, std::int32_t exclude,
-                                                   bool front, Visitor&& visit) {
+FREEFORM_HD inline SurfaceHit find_heightfield_hit(const View& hf, Vec3 o, Vec3 d, std::int32_t exclude, bool front,
+                                                   Visitor&& visit) {
     SurfaceHit hit;
-    const float inf = INFINITY;
-    // Slab interval.
-    float t0 = 0.0f, t1 = inf;
-    if (d.z != 0.0f) {
-        const float ta = (hf.h_min - o.z) / d.z, tb = (hf.h_max - o.z) / d.z;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.z < hf.h_min || o.z > hf.h_max) {
-        return hit;
-    }
-    // Rectangle interval.
-    const float u1 = hf.u0 + float(hf.nx - 1) * hf.du, v1 = hf.v0 + float(hf.ny - 1) * hf.dv;
-    if (d.x != 0.0f) {
-        const float ta = (hf.u0 - o.x) / d.x, tb = (u1 - o.x) / d.x;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.x < hf.u0 || o.x > u1) {
-        return hit;
-    }
-    if (d.y != 0.0f) {
-        const float ta = (hf.v0 - o.y) / d.y, tb = (v1 - o.y) / d.y;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.y < hf.v0 || o.y > v1) {
-        return hit;
-    }
-    if (!(t0 <= t1)) return hit;
-
-    // Re-base the ray at the slab entry so that cell-local arithmetic stays small.
-    const Vec3 e = o + t0 * d;
-    const float inv_du = 1.0f / hf.du, inv_dv = 1.0f / hf.dv;
-    const float gx = (e.x - hf.u0) * inv_du, gy = (e.y - hf.v0) * inv_dv;  // grid coordinates
-    int ci = floor_i(gx), cj = floor_i(gy);
-    ci = ci < 0 ? 0 : (ci > hf.nx - 2 ? hf.nx - 2 : ci);
-    cj = cj < 0 ? 0 : (cj > hf.ny - 2 ? hf.ny - 2 : cj);
-    const float ad = d.x * inv_du, bd = d.y * inv_dv;  // grid units per unit t
-    const int step_i = ad > 0.0f ? 1 : -1, step_j = bd > 0.0f ? 1 : -1;
-    const float dt_i = ad != 0.0f ? fabsf(1.0f / ad) : inf;
-    const float dt_j = bd != 0.0f ? fabsf(1.0f / bd) : inf;
-    float tn_i = ad != 0.0f ? (float(ci + (ad > 0.0f ? 1 : 0)) - gx) / ad : inf;  // t (from e) to next column
-    float tn_j = bd != 0.0f ? (float(cj + (bd > 0.0f ? 1 : 0)) - gy) / bd : inf;
-    const float t_len = t1 - t0;
-    float tc = 0.0f;
-    constexpr float eps = 1e-5f;  // tolerance in cell units: no cracks between cells
-
-    while (true) {
-        const float tc_end = min_f(min_f(tn_i, tn_j), t_len);
-        visit(ci, cj);
-        if (hf.cell_active(ci, cj)) {
-            const float h00 = hf.height(ci, cj), h10 = hf.height(ci + 1, cj);
-            const float h01 = hf.height(ci, cj + 1), h11 = hf.height(ci + 1, cj + 1);
-            const float z0 = e.z + tc * d.z, z1 = e.z + tc_end * d.z;
-            const float zlo = min_f(z0, z1), zhi = max_f(z0, z1);
-            const float hlo = min_f(min_f(h00, h10), min_f(h01, h11));
-            const float hhi = max_f(max_f(h00, h10), max_f(h01, h11));
-            if (zlo <= hhi && zhi >= hlo) {
-                // Cell-local ray: a = (x - x_i)/du, b = (y - y_j)/dv, z.
-                const float ao = gx - float(ci), bo = gy - float(cj);
-                const std::int32_t base = 2 * (cj * (hf.nx - 1) + ci);
-                float best_t = inf;
-                int best_k = -1;
-                float best_a = 0, best_b = 0;
-                for (int k = 0; k < 2; ++k) {
-                    if (base + k == exclude) continue;
-                    // Plane z = h00 + A a + B b over the triangle.
-                    const float A = k == 0 ? h10 - h00 : h11 - h01;
-                    const float B = k == 0 ? h11 - h10 : h01 - h00;
-                    // denom = d · (-A/du, -B/dv, 1): negative when the ray meets the front.
-                    const float denom = d.z - A * ad - B * bd;
-                    if (front ? !(denom < 0.0f) : !(denom > 0.0f)) continue;
-                    const float t = (h00 + A * ao + B * bo - e.z) / denom;
-                    if (!(t >= 0.0f)) continue;  // the (a, b) test below keeps it in this cell
-                    const float a = ao + ad * t, b = bo + bd * t;
-                    const bool inside = k == 0 ? (b >= -eps && a <= 1.0f + eps && b <= a + eps)
-                                               : (a >= -eps && b <= 1.0f + eps && a <= b + eps);
-                    if (inside && t < best_t) {
-                        best_t = t, best_k = k, best_a = a, best_b = b;
-                    }
-                }
-                if (best_k >= 0) {
-                    hit.kind = HitKind::surface;
-                    hit.t = t0 + best_t;
-                    hit.tri = base + best_k;
-                    const float a = min_f(max_f(best_a, 0.0f), 1.0f), b = min_f(max_f(best_b, 0.0f), 1.0f);
-                    if (best_k == 0) {  // (v00, v10, v11): (1-a, a-b, b)
-                        const float bb = min_f(b, a);
-                        hit.b0 = 1.0f - a, hit.b1 = a - bb, hit.b2 = bb;
-                    } else {  // (v00, v11, v01): (1-b, a, b-a)
-                        const float aa = min_f(a, b);
-                        hit.b0 = 1.0f - b, hit.b1 = aa, hit.b2 = b - aa;
-                    }
-                    fill_hit_vertices(hf, hit);
-                    return hit;
-                }
-            }
-        }
-        if (tc_end >= t_len) return hit;
-        if (tn_i < tn_j) {
-            ci += step_i;
-            if (ci < 0 || ci > hf.nx - 2) return hit;
-            tc = tn_i;
-            tn_i += dt_i;
-        } else {
-            cj += step_j;
-            if (cj < 0 || cj > hf.ny - 2) return hit;
-            tc = tn_j;
-            tn_j += dt_j;
-        }
-    }
+    const hf_detail::Grid g = hf_detail::grid_of(hf);
+    hf_detail::nearest_hit(hf, g, o, d, exclude, front, visit, hit);
+    return hit;
 }
 
 // Traces one ray through the height field to its end.
 template <class View, class Visitor>
 FREEFORM_HD inline RayRecord trace_heightfield_ray(const View& hf, const PathParams& pp, Vec3 o, Vec3 d,
                                                    Visitor&& visit) {
+    const hf_detail::Grid g = hf_detail::grid_of(hf);
     PathState s;
     s.o = o;
     s.d = d;
     RayRecord rec;
+    SurfaceHit hit;
     while (true) {
-        const SurfaceHit hit = find_heightfield_hit(hf, s.o, s.d, s.exclude, wants_front(s), visit);
+        hit.kind = HitKind::none;
+        hf_detail::nearest_hit(hf, g, s.o, s.d, s.exclude, wants_front(s), visit, hit);
         if (!advance(pp, s, hit, rec)) return rec;
     }
 }
 
 }  // namespace freeform
+
+#undef FREEFORM_HF_INLINE

@@ -247,8 +247,7 @@ public:
             const Fixed w = rays_->weight[std::size_t(id)];
             change.status_delta[std::size_t(before.status)] -= w;
             change.status_delta[std::size_t(now.status)] += w;
-            deposit_record_delta(before, -w, change.histogram);
-            deposit_record_delta(now, w, change.histogram);
+            move_deposit(before, now, w, change.histogram);
         }
         change.cell_begin[change.rays.size()] = std::int32_t(change.cells.size());
     }
@@ -279,13 +278,28 @@ private:
                 }
     }
 
-    void deposit_record_delta(const RayRecord& r, Fixed w, SparseDelta& d) const {
-        if (r.status != RayStatus::receiver) return;
-        if (w >= 0) {
-            deposit(params_.receiver, r.px, r.py, w, [&](std::int64_t c, Fixed a) { d.add(c, a); });
-        } else {  // the exact negation of the deposit made with +|w|
-            deposit(params_.receiver, r.px, r.py, -w, [&](std::int64_t c, Fixed a) { d.add(c, -a); });
-        }
+    // Removes a ray's old deposit and adds its new one. A ray that moves a little keeps
+    // its four bilinear cells: their differences are added once instead of eight times.
+    void move_deposit(const RayRecord& before, const RayRecord& now, Fixed w, SparseDelta& d) const {
+        std::int64_t cell[8];
+        Fixed amount[8];
+        int n = 0;
+        if (before.status == RayStatus::receiver)
+            deposit(params_.receiver, before.px, before.py, w, [&](std::int64_t c, Fixed a) {
+                cell[n] = c, amount[n++] = -a;
+            });
+        const int old_n = n;
+        if (now.status == RayStatus::receiver)
+            deposit(params_.receiver, now.px, now.py, w, [&](std::int64_t c, Fixed a) {
+                for (int k = 0; k < old_n; ++k)
+                    if (cell[k] == c) {
+                        amount[k] += a;
+                        return;
+                    }
+                cell[n] = c, amount[n++] = a;
+            });
+        for (int k = 0; k < n; ++k)
+            if (amount[k] != 0) d.add(cell[k], amount[k]);
     }
 
     const Heightmap* surface_;

@@ -67,10 +67,11 @@ FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixe
         add(std::int64_t(y) * rv.width + x, w);
         return;
     }
-    const float sx = px - 0.5f, sy = py - 0.5f;
-    const float flx = std::floor(sx), fly = std::floor(sy);
-    const double fx = double(sx - flx), fy = double(sy - fly);
-    int x0 = int(flx), y0 = int(fly);
+    const float sx = px - 0.5f, sy = py - 0.5f;  // >= -0.5: floor by truncation and one compare
+    int x0 = int(sx), y0 = int(sy);
+    x0 -= sx < float(x0) ? 1 : 0;
+    y0 -= sy < float(y0) ? 1 : 0;
+    const double fx = double(sx - float(x0)), fy = double(sy - float(y0));
     int x1 = x0 + 1, y1 = y0 + 1;
     x0 = x0 < 0 ? 0 : x0;
     y0 = y0 < 0 ? 0 : y0;
@@ -117,8 +118,8 @@ FREEFORM_HD inline Vec3 shading_normal(const SurfaceHit& h) {
 struct MaterialView {
     bool lens = false;
     float ior = 1.5f;
-    float back_w = 0;                  // lens back face plane (w = -thickness)
-    float half_u = 0, half_v = 0;      // lens body half extents (side walls)
+    float back_w = 0;              // lens back face plane (w = -thickness)
+    float half_u = 0, half_v = 0;  // lens body half extents (side walls)
 };
 
 // The state of a ray between segments.
@@ -141,43 +142,54 @@ struct PathParams {
     int max_depth = 8;
 };
 
+namespace path_detail {
+
+// The segment met no surface: inside a lens it ends on the flat back face; otherwise the
+// ray has left the surface and ends on the receiver (or misses it).
+FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRecord& rec) {
+    if (s.inside) {
+        const MaterialView& m = pp.material;
+        if (!(s.d.z < 0.0f)) {
+            s.status = RayStatus::absorbed;  // leaves through a side wall
+        } else {
+            const float t = (m.back_w - s.o.z) / s.d.z;
+            const Vec3 p = s.o + t * s.d;
+            Vec3 out;
+            if (std::fabs(p.x) > m.half_u || std::fabs(p.y) > m.half_v) {
+                s.status = RayStatus::absorbed;
+            } else if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
+                s.status = RayStatus::lost_tir;
+            } else {
+                s.o = p;
+                s.d = normalize(out);
+                s.inside = false;
+                s.exclude = -1;
+                s.status = RayStatus::active;
+                return true;  // one more segment: it may still meet nothing but the receiver
+            }
+        }
+    } else if (s.depth == 0) {
+        s.status = RayStatus::missed_surface;
+    } else if (pp.receiver.hit(s.o, s.d, rec.px, rec.py)) {
+        s.status = RayStatus::receiver;
+    } else {
+        s.status = RayStatus::missed_receiver;
+    }
+    rec.status = s.status;
+    rec.depth = s.depth;
+    return false;
+}
+
+}  // namespace path_detail
+
 // Given the nearest hit of the current segment (kind none when there is none), moves the
 // ray to its next segment or finishes it. Returns true while the ray is still active.
+//
+// Directions leaving a mirror are unit only up to rounding (see the reflection below):
+// every intersection a segment takes part in is invariant under scaling its direction,
+// and the refraction formula is off by no more than that rounding.
 FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const SurfaceHit& hit, RayRecord& rec) {
-    if (hit.kind == HitKind::none) {
-        if (s.inside) {
-            // Inside the lens: the segment ends on the flat back face.
-            const MaterialView& m = pp.material;
-            if (!(s.d.z < 0.0f)) {
-                s.status = RayStatus::absorbed;  // leaves through a side wall
-            } else {
-                const float t = (m.back_w - s.o.z) / s.d.z;
-                const Vec3 p = s.o + t * s.d;
-                Vec3 out;
-                if (std::fabs(p.x) > m.half_u || std::fabs(p.y) > m.half_v) {
-                    s.status = RayStatus::absorbed;
-                } else if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
-                    s.status = RayStatus::lost_tir;
-                } else {
-                    s.o = p;
-                    s.d = normalize(out);
-                    s.inside = false;
-                    s.exclude = -1;
-                    s.status = RayStatus::active;
-                    return true;  // one more segment: it may still meet nothing but the receiver
-                }
-            }
-        } else if (s.depth == 0) {
-            s.status = RayStatus::missed_surface;
-        } else if (pp.receiver.hit(s.o, s.d, rec.px, rec.py)) {
-            s.status = RayStatus::receiver;
-        } else {
-            s.status = RayStatus::missed_receiver;
-        }
-        rec.status = s.status;
-        rec.depth = s.depth;
-        return false;
-    }
+    if (hit.kind == HitKind::none) return path_detail::end_of_segment(pp, s, rec);
     if (hit.kind == HitKind::absorber) {
         s.status = rec.status = RayStatus::absorbed;
         rec.depth = s.depth;
@@ -189,15 +201,18 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
         return false;
     }
     const Vec3 flat = s.o + hit.t * s.d;
-    const Vec3 p = phong_point(hit, flat, pp.phong_alpha);
-    const Vec3 ns = shading_normal(hit);
-    s.o = p;
+    // The interpolated normal before normalisation: a mirror needs only its direction.
+    const Vec3 m = hit.b0 * hit.n[0] + hit.b1 * hit.n[1] + hit.b2 * hit.n[2];
+    s.o = phong_point(hit, flat, pp.phong_alpha);
     s.exclude = hit.tri;
     if (hit.kind == HitKind::mirror_mesh || !pp.material.lens) {
-        s.d = normalize(reflect(s.d, ns));
+        // d - 2 (d·n) n with n = m / |m|, written without the square root and the two
+        // normalisations: |d| stays 1 up to rounding.
+        s.d = s.d - (2.0f * dot(s.d, m) / dot(m, m)) * m;
         return true;
     }
     // Lens front face: into the material from outside, out of it from inside.
+    const Vec3 ns = m * (1.0f / std::sqrt(dot(m, m)));  // shading_normal(hit)
     Vec3 out;
     const float from = s.inside ? pp.material.ior : 1.0f;
     const float to = s.inside ? 1.0f : pp.material.ior;
