@@ -33,7 +33,23 @@ struct ProposalSettings {
     double min_shift_cells = 0.25;
 };
 
-class ReflectorProblem {
+// How a problem retraces the rays a move can affect. The height-field backend traces
+// against "surface + overlay" through an OverlayView: delta() changes nothing, so
+// several deltas can run at once. Other backends (Embree, trace/embree_incremental.hpp)
+// must show the move to their acceleration structure first: they apply it, retrace and
+// restore, so their deltas run one at a time.
+struct HeightfieldBackend {
+    static constexpr bool concurrent_deltas = true;
+    static constexpr const char* name = "heightfield";
+    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
+    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change) const {
+        trace.evaluate(o, change);
+    }
+    void committed(const Patch&) {}
+};
+
+template <class Backend = HeightfieldBackend>
+class BasicReflectorProblem {
 public:
     struct Move {
         HeightOverlay overlay;
@@ -49,10 +65,12 @@ public:
     // `metres_per_cell_shift`: the height amplitude that moves the light by one receiver
     // cell per grid unit of kernel width (see design/designer.hpp). `reference_temperature`
     // scales amplitudes with temperature.
-    ReflectorProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
-                     ObjectiveWeights weights, const Penalties& penalties, ProposalSettings proposals,
-                     AnyBandit bandit, double metres_per_cell_shift, double reference_temperature)
-        : surface_(&surface), rays_(&rays), trace_(surface, rays, params), image_(std::move(target)),
+    BasicReflectorProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
+                          ObjectiveWeights weights, const Penalties& penalties, ProposalSettings proposals,
+                          AnyBandit bandit, double metres_per_cell_shift, double reference_temperature,
+                          Backend backend = {})
+        : backend_(std::move(backend)), surface_(&surface), rays_(&rays), trace_(surface, rays, params),
+          image_(std::move(target)),
           weights_(weights), penalties_(&penalties), proposals_(std::move(proposals)), bandit_(std::move(bandit)),
           unit_(metres_per_cell_shift), t_ref_(reference_temperature) {
         for (const auto& s : proposals_.bank) kernels_.emplace_back(s);
@@ -63,7 +81,7 @@ public:
 
     // Full recompute of every maintained quantity (level start, after restore_best).
     void rebuild() {
-        const Histogram h = trace_.rebuild(exec::omp);
+        const Histogram h = backend_.rebuild(trace_);
         image_.reset(h);
         penalty_sum_ = penalties_->full(*surface_);
         value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
@@ -110,7 +128,7 @@ public:
             m.penalty_sum = penalty_sum_;
             return m.delta_value = 0.0;
         }
-        trace_.evaluate(m.overlay, m.change);
+        backend_.evaluate(trace_, m.overlay, m.change);
         m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
         m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
         const ObjectiveValue after =
@@ -127,6 +145,7 @@ public:
             best_is_current_ = false;
         }
         m.overlay.commit(*surface_);
+        backend_.committed(m.overlay.patch);
         trace_.commit(m.change);
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
@@ -153,6 +172,7 @@ public:
     void restore_best() {
         if (best_is_current_ || best_heights_.empty()) return;
         surface_->set_heights(best_heights_);
+        backend_.committed(surface_->full_patch());
         rebuild();
     }
 
@@ -195,6 +215,7 @@ private:
         max_error_ = double(m);
     }
 
+    mutable Backend backend_;  // mutable: a backend may show a move to its structures in delta()
     Heightmap* surface_;
     const RaySet* rays_;
     IncrementalTrace trace_;
@@ -213,5 +234,7 @@ private:
     std::vector<float> best_heights_;
     double max_error_ = 0;
 };
+
+using ReflectorProblem = BasicReflectorProblem<HeightfieldBackend>;
 
 }  // namespace freeform

@@ -198,6 +198,26 @@ public:
         return histogram();
     }
 
+    // Full trace with a caller-supplied tracer: retrace(id, visit) traces ray `id`,
+    // calling visit(ci, cj) for every cell its path crosses inside the slab (serial).
+    template <class Retrace>
+    Histogram rebuild_with(Retrace&& retrace) {
+        const std::int64_t n = rays_->size();
+        records_.assign(std::size_t(n), RayRecord{});
+        index_.reset(n, cell_count());
+        std::vector<std::int32_t> cells;
+        for (std::int64_t k = 0; k < n; ++k) {
+            cells.clear();
+            CellCollector visit{&cells, 0, surface_->nx() - 1};
+            records_[std::size_t(k)] = retrace(std::int32_t(k), visit);
+            index_.assign(std::int32_t(k), cells);
+        }
+        status_weight_.fill(0);
+        for (std::size_t k = 0; k < records_.size(); ++k)
+            status_weight_[std::size_t(records_[k].status)] += rays_->weight[k];
+        return histogram();
+    }
+
     // The histogram of the maintained records.
     Histogram histogram() const {
         Histogram h(params_.receiver.width, params_.receiver.height);
