@@ -1,0 +1,227 @@
+// Iterations per second of the annealer's inner loop (propose, evaluate, accept/reject):
+// full retrace (what the reference does) against incremental evaluation, serial and
+// speculative, for both tracers, over mesh size, receiver resolution and kernel size.
+//
+//   build/release/bin/bench_incremental --benchmark_counters_tabular=true
+//
+// Counters: iterations_per_second (the figure to compare), acceptance (fraction of moves
+// accepted; the speculative speed-up depends on it), rays_per_move (rays retraced per
+// evaluated move). Ratios are meant to be read within one run: the machine is shared.
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include <freeform/anneal/annealer.hpp>
+#include <freeform/design/problem.hpp>
+#include <freeform/io/font.hpp>
+#include <freeform/objective/target.hpp>
+#include <freeform/propose/kernel.hpp>
+#include <freeform/scene/rays.hpp>
+#include <freeform/trace/heightfield.hpp>
+#include <freeform/trace/setup.hpp>
+#if defined(FREEFORM_WITH_EMBREE)
+#include <freeform/trace/embree_incremental.hpp>
+#endif
+
+using namespace freeform;
+
+namespace {
+
+// The DESIGN.md §2 scene with the letter-E target, a mildly curved start (so that light
+// is spread over the receiver as during a design) and 16 rays per receiver cell.
+struct Bench {
+    Scene scene;
+    Heightmap surface;
+    RaySet rays;
+    PathParams params;
+    Target target;
+    Penalties penalties;
+
+    Bench(int mesh, int resolution) {
+        scene.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
+        scene.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
+        scene.receiver.width = scene.receiver.height = resolution;
+        scene.light.rays_per_cell = 16;
+        surface = Heightmap(mesh, mesh, scene.surface.size, scene.surface.h_min, scene.surface.h_max,
+                            scene.surface.frame);
+        std::vector<float> h(std::size_t(mesh) * mesh);
+        for (int j = 0; j < mesh; ++j)
+            for (int i = 0; i < mesh; ++i) {
+                const double u = surface.u_of(i), v = surface.v_of(j);
+                h[std::size_t(j) * mesh + i] = float(-(u * u + v * v) * 0.1 + 0.0004 * std::sin(90 * u) * std::cos(70 * v));
+            }
+        surface.set_heights(h);
+        rays = generate_rays(scene.light, surface, scene.receiver, 1);
+        params = make_path_params(scene);
+        const ImageD img = io::render_text("E", io::find_font("DejaVuSans-Bold"), 4 * resolution, 4 * resolution, 0.1)
+                               .cast<double>();
+        target = make_target(img, resolution, resolution, rays.total);
+    }
+
+    ProposalSettings proposals(int support) const {
+        ProposalSettings p;
+        p.bank = default_kernel_bank(support);
+        return p;
+    }
+    double unit() const {
+        return 0.2 / scene.receiver.width * surface.du() / (2 * 0.5);
+    }
+};
+
+// Anneals at a fixed temperature chosen so that about a third of the moves are accepted.
+template <class Problem>
+void run_annealer(benchmark::State& state, Problem& problem, int speculative, std::int64_t iterations) {
+    AnnealOptions o;
+    o.seed = 3;
+    o.cooling = 1.0;  // hold the temperature: a steady acceptance rate
+    o.max_iterations = iterations;
+    o.speculative = speculative;
+    o.threads = speculative;
+    o.adaptive_speculation = false;
+    // Temperature: the mean uphill delta of a few trial moves.
+    typename Problem::Move m;
+    double up = 0;
+    int n = 0;
+    for (std::uint64_t k = 0; k < 32; ++k) {
+        CounterRng rng(99, k);
+        problem.propose(rng, 1.0, m);
+        const double d = problem.delta(m);
+        if (d > 0) up += d, ++n;
+    }
+    // A tenth of the mean uphill delta: a low-temperature phase, where designs spend most
+    // of their time and most moves are rejected.
+    o.initial_temperature = n > 0 ? 0.1 * up / n : 1e-6;
+    std::int64_t done = 0, accepted = 0, evaluated = 0;
+    double seconds = 0;
+    for (auto _ : state) {
+        const AnnealResult r = anneal(problem, o);
+        done += r.iterations;
+        accepted += r.accepted;
+        evaluated += r.proposals_evaluated;
+        seconds += r.seconds;
+    }
+    state.counters["iterations_per_second"] = double(done) / seconds;
+    state.counters["acceptance"] = double(accepted) / double(done);
+    state.counters["evaluated_per_iteration"] = double(evaluated) / double(done);
+}
+
+void incremental(benchmark::State& state) {
+    const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
+    const int speculative = int(state.range(3));
+    Bench b(mesh, resolution);
+    ReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
+                             make_bandit("uniform", 7), b.unit(), 1.0);
+    // Rays per move, measured on a few proposals.
+    ReflectorProblem::Move m;
+    std::int64_t rays = 0;
+    for (std::uint64_t k = 0; k < 32; ++k) {
+        CounterRng rng(5, k);
+        problem.propose(rng, 1.0, m);
+        (void)problem.delta(m);
+        rays += std::int64_t(m.change.rays.size());
+    }
+    run_annealer(state, problem, speculative, 2000);
+    state.counters["rays_per_move"] = double(rays) / 32;
+    state.counters["rays"] = double(b.rays.size());
+}
+
+// The reference's loop: every move retraces every ray.
+void full_retrace(benchmark::State& state) {
+    const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
+    Bench b(mesh, resolution);
+    HeightfieldTracer tracer(b.surface, b.rays, b.params);
+    ImageState image(b.target);
+    Histogram h(resolution, resolution);
+    TraceTotals totals;
+    tracer.trace_all(exec::omp, h, totals);
+    image.reset(h);
+    const ObjectiveWeights w;
+    double value = combine(image.sums(), b.rays.total, 0, w).total;
+    const Kernel kernel(b.proposals(support).bank[0]);
+    HeightOverlay overlay;
+    std::int64_t iterations = 0, accepted = 0;
+    for (auto _ : state) {
+        CounterRng rng(7, std::uint64_t(iterations));
+        const int ci = int(rng.below(std::uint64_t(mesh))), cj = int(rng.below(std::uint64_t(mesh)));
+        apply_kernel(b.surface, kernel, ci, cj, float(rng.uniform(-4, 4) * b.unit() * 2), overlay);
+        const HeightSnapshot before = b.surface.snapshot(overlay.patch);
+        overlay.commit(b.surface);
+        tracer.trace_all(exec::omp, h, totals);
+        image.reset(h);
+        const double now = combine(image.sums(), b.rays.total, 0, w).total;
+        if (now <= value) {
+            value = now;
+            ++accepted;
+        } else {
+            b.surface.restore(before);
+        }
+        ++iterations;
+    }
+    state.counters["iterations_per_second"] = benchmark::Counter(double(iterations), benchmark::Counter::kIsRate);
+    state.counters["acceptance"] = double(accepted) / double(iterations);
+    state.counters["rays_per_move"] = double(b.rays.size());
+}
+
+#if defined(FREEFORM_WITH_EMBREE)
+void embree_incremental(benchmark::State& state) {
+    const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
+    Bench b(mesh, resolution);
+    EmbreeTracer tracer(b.surface, b.rays, b.params);
+    EmbreeReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
+                                   make_bandit("uniform", 7), b.unit(), 1.0, EmbreeBackend{&tracer, &b.surface});
+    run_annealer(state, problem, 1, 300);
+}
+
+// Cost of refitting the Embree tiles after a kernel move, against the mesh size.
+void embree_refit(benchmark::State& state) {
+    const int mesh = int(state.range(0));
+    Bench b(mesh, 100);
+    EmbreeTracer tracer(b.surface, b.rays, b.params);
+    std::int64_t k = 0, tiles = 0;
+    for (auto _ : state) {
+        const int ci = int((k * 7919) % (mesh - 6)), cj = int((k * 104729) % (mesh - 6));
+        tracer.surface_changed(Patch{ci, cj, ci + 6, cj + 6});
+        tiles += tracer.tiles_touched_last_update();
+        ++k;
+    }
+    state.counters["tiles_per_refit"] = double(tiles) / double(k);
+}
+#endif
+
+void sizes(benchmark::internal::Benchmark* b, bool speculative) {
+    for (int resolution : {100, 200})
+        for (int mesh : {51, 101, 201, 401}) {
+            b->Args({mesh, resolution, 5, 1});
+            if (speculative) b->Args({mesh, resolution, 5, 2});
+        }
+    // The cost of a move follows the kernel's footprint, not the mesh.
+    for (int support : {3, 9, 17}) b->Args({101, 100, support, 1});
+}
+
+}  // namespace
+
+BENCHMARK(incremental)
+    ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, true); })
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(full_retrace)
+    ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, false); })
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->Iterations(10)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+#if defined(FREEFORM_WITH_EMBREE)
+BENCHMARK(embree_incremental)
+    ->Args({51, 100, 5, 1})
+    ->Args({101, 100, 5, 1})
+    ->Args({201, 100, 5, 1})
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(embree_refit)->Arg(51)->Arg(101)->Arg(201)->Arg(401)->ArgNames({"mesh"})->Unit(benchmark::kMicrosecond);
+#endif
