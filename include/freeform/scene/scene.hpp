@@ -91,7 +91,7 @@ struct OptimiseSpec {
     double min_shift_cells = 0.25;
 
     // Annealing schedule.
-    double initial_acceptance = 0.1;  // of uphill moves at the start of each stage
+    double initial_acceptance = 0.03;  // of uphill moves at the start of each stage
     double cooling = 0.95;
     int temperature_steps = 120;      // cooling steps per stage
     double reheat_factor = 0.5;
