@@ -361,6 +361,7 @@ int run_design(const DesignArgs& a) {
     }
     m["bandit"] = options.bandit;
     m["bandit_weights"] = result.bandit_weights;
+    if (!result.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = result.preprocess_rates;
     m["kernels"] = bank;
     json levels = json::array();
     for (const auto& s : result.stages)

@@ -73,6 +73,7 @@ struct DesignResult {
     std::vector<ConvergencePoint> convergence;
     std::vector<KernelShape> kernel_bank;  // of the last stage
     std::vector<double> bandit_weights;    // of the last stage
+    std::vector<double> preprocess_rates;  // reward per pull of each shape in the pre-process
     std::int64_t rays = 0;
 };
 
@@ -165,13 +166,22 @@ inline Penalties make_penalties(const DesignOptions& o) {
     return p;
 }
 
-inline ProposalSettings proposals_for(const DesignOptions& o, int support) {
+// The kernel bank of a stage; `kept` (when not empty) lists the shapes the bandit's
+// pre-process kept (indices into default_kernel_bank, the same at every support).
+inline ProposalSettings proposals_for(const DesignOptions& o, int support, const std::vector<int>& kept = {}) {
     ProposalSettings p;
     p.single_vertex = o.single_vertex;
     p.error_guided = o.error_guided;
     p.max_shift_cells = o.max_shift_cells;
     p.min_shift_cells = o.min_shift_cells;
-    if (!o.single_vertex) p.bank = default_kernel_bank(std::max(3, support | 1));
+    if (!o.single_vertex) {
+        const auto bank = default_kernel_bank(std::max(3, support | 1));
+        if (kept.empty()) {
+            p.bank = bank;
+        } else {
+            for (int k : kept) p.bank.push_back(bank[std::size_t(k)]);
+        }
+    }
     return p;
 }
 
@@ -225,6 +235,7 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
     double share_used = 0;
     Heightmap surface = std::move(initial);
     bool stop = false;
+    std::vector<int> kept_arms;  // after the history bandit's pre-process
 
     for (std::size_t li = 0; li < levels.size() && !stop; ++li) {
         const LevelPlan& level = levels[li];
@@ -247,12 +258,42 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
         const double level_share = level.time_share;
         for (std::size_t si = 0; si < stages && !stop; ++si) {
             const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
-            ProposalSettings ps = design_detail::proposals_for(options, support);
+            const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
+            const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold};
+            // The history bandit's pre-process (reference §4.3.2): a short run with every
+            // shape equally likely, then only the shapes that paid best are kept.
+            if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
+                options.preprocess_iterations > 0 && options.preprocess_keep > 0) {
+                ProposalSettings all = design_detail::proposals_for(options, support);
+                const int arms = int(all.bank.size());
+                ReflectorProblem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+                                     weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
+                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), options.initial_acceptance);
+                pre.set_reference_temperature(cal.temperature);
+                AnnealOptions po;
+                po.seed = hash_combine(stage_seed, 2);
+                po.initial_temperature = cal.temperature;
+                po.cooling = 1.0;
+                po.max_iterations = options.preprocess_iterations;
+                po.time_budget = options.time_budget > 0 ? 0.05 * options.time_budget : 0;
+                po.threads = 1;
+                const AnnealResult pr = anneal(pre, po);
+                total_iterations += pr.iterations;
+                result.accepted += pr.accepted;
+                std::vector<double> rate(std::size_t(arms), 0.0);
+                for (int a = 0; a < arms; ++a) {
+                    const auto pulls = pre.bandit().pulls()[std::size_t(a)];
+                    rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
+                }
+                kept_arms = HistoryBandit::preselect(rate, std::min(options.preprocess_keep, arms));
+                std::sort(kept_arms.begin(), kept_arms.end());
+                result.preprocess_rates = rate;
+            }
+            ProposalSettings ps = design_detail::proposals_for(options, support, kept_arms);
             const int arms = std::max<int>(1, int(ps.bank.size()));
             ReflectorProblem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
-                                     ObjectiveWeights{options.sobel_weight, options.energy_threshold}, penalties, ps,
+                                     weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
-            const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance);
             const double t0 = cal.temperature;
             problem.set_reference_temperature(t0);

@@ -85,6 +85,8 @@ struct OptimiseSpec {
     // Proposals.
     std::string bandit = "history";
     int bandit_sync = 64;
+    std::int64_t preprocess_iterations = 1000;  // history bandit: trial run with all shapes (0: none)
+    int preprocess_keep = 4;                    // ... after which the best shapes are kept
     bool error_guided = false;
     bool single_vertex = false;
     double max_shift_cells = 4.0;

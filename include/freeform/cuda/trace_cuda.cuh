@@ -1,0 +1,413 @@
+#pragma once
+// The height-field tracer on the GPU (DESIGN.md §5). The surface, the aperture mask and
+// the rays live in device memory; every ray is traced by trace_heightfield_ray, the same
+// FREEFORM_HD kernel HeightfieldTracer runs on the CPU, through for_each(exec::cuda, ...),
+// and deposited with the same `deposit` into a fixed-point histogram with 64-bit atomics.
+// Fixed-point sums are exact and order-free, so the GPU histogram equals the CPU one bit
+// for bit, provided neither side contracts a*b+c into a fused multiply-add: compile the
+// CUDA side with --fmad=false and the host side without FMA contraction (docs/cuda.md).
+//
+// Compile with nvcc (--extended-lambda is not needed by this header, but by lambdas passed
+// to for_each(exec::cuda, ...)); include <freeform/cuda.hpp> from mixed code.
+#include <cuda_runtime.h>
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "../core/error.hpp"
+#include "../core/exec.hpp"
+#include "../core/fixed_point.hpp"
+#include "../core/hd.hpp"
+#include "../core/histogram.hpp"
+#include "../scene/rays.hpp"
+#include "../surface/heightmap.hpp"
+#include "../surface/overlay.hpp"
+#include "../trace/heightfield.hpp"
+#include "../trace/heightfield_kernel.hpp"
+#include "../trace/path.hpp"
+#include "../trace/tracer.hpp"
+#include "exec_cuda.cuh"
+
+namespace freeform::cuda {
+
+// An array in device memory (cudaMalloc, never managed memory), freed on destruction.
+// Copies are explicit (upload/download) and synchronous with respect to the host unless
+// a stream is given, in which case the caller synchronises before touching the data.
+template <class T>
+class DeviceBuffer {
+    static_assert(std::is_trivially_copyable_v<T>, "DeviceBuffer holds plain data copied byte by byte");
+
+public:
+    DeviceBuffer() = default;
+    explicit DeviceBuffer(std::size_t n) { resize(n); }
+    explicit DeviceBuffer(std::span<const T> host) {
+        resize(host.size());
+        upload(host);
+    }
+    DeviceBuffer(const DeviceBuffer&) = delete;
+    DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+    DeviceBuffer(DeviceBuffer&& o) noexcept
+        : ptr_(std::exchange(o.ptr_, nullptr)), size_(std::exchange(o.size_, 0)),
+          capacity_(std::exchange(o.capacity_, 0)) {}
+    DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
+        std::swap(ptr_, o.ptr_);
+        std::swap(size_, o.size_);
+        std::swap(capacity_, o.capacity_);
+        return *this;
+    }
+    ~DeviceBuffer() {
+        if (ptr_) (void)cudaFree(ptr_);  // a destructor cannot report; a failed free leaks
+    }
+
+    T* data() { return ptr_; }
+    const T* data() const { return ptr_; }
+    std::size_t size() const { return size_; }
+    bool empty() const { return size_ == 0; }
+
+    // Sets the size to n; the contents are undefined afterwards. Memory is reallocated
+    // only when n exceeds what the buffer ever held, so per-call scratch does not churn.
+    void resize(std::size_t n) {
+        if (n > capacity_) {
+            T* p = nullptr;
+            check(cudaMalloc(reinterpret_cast<void**>(&p), n * sizeof(T)),
+                  "DeviceBuffer: cudaMalloc of " + std::to_string(n * sizeof(T)) + " bytes");
+            if (ptr_) (void)cudaFree(ptr_);
+            ptr_ = p;
+            capacity_ = n;
+        }
+        size_ = n;
+    }
+
+    // Copies host[0, host.size()) to elements [offset, offset + host.size()).
+    void upload(std::span<const T> host, std::size_t offset = 0, cudaStream_t stream = nullptr) {
+        if (host.empty()) return;
+        require(offset, host.size(), "upload");
+        check(cudaMemcpyAsync(ptr_ + offset, host.data(), host.size_bytes(), cudaMemcpyHostToDevice, stream),
+              "DeviceBuffer: upload");
+        if (!stream) check(cudaStreamSynchronize(stream), "DeviceBuffer: upload");
+    }
+    // Copies elements [offset, offset + host.size()) to host.
+    void download(std::span<T> host, std::size_t offset = 0, cudaStream_t stream = nullptr) const {
+        if (host.empty()) return;
+        require(offset, host.size(), "download");
+        check(cudaMemcpyAsync(host.data(), ptr_ + offset, host.size_bytes(), cudaMemcpyDeviceToHost, stream),
+              "DeviceBuffer: download");
+        if (!stream) check(cudaStreamSynchronize(stream), "DeviceBuffer: download");
+    }
+    std::vector<T> to_host() const {
+        std::vector<T> v(size_);
+        download(v);
+        return v;
+    }
+    // Sets every byte to zero (for integers and floats: every element to 0).
+    void zero(cudaStream_t stream = nullptr) {
+        if (size_ == 0) return;
+        check(cudaMemsetAsync(ptr_, 0, size_ * sizeof(T), stream), "DeviceBuffer: zero");
+        if (!stream) check(cudaStreamSynchronize(stream), "DeviceBuffer: zero");
+    }
+
+private:
+    void require(std::size_t offset, std::size_t count, const char* what) const {
+        if (offset > size_ || count > size_ - offset)
+            throw InputError(std::string("DeviceBuffer: ") + what + " of " + std::to_string(count) +
+                             " elements at offset " + std::to_string(offset) + " overruns a buffer of " +
+                             std::to_string(size_));
+    }
+
+    T* ptr_ = nullptr;
+    std::size_t size_ = 0;
+    std::size_t capacity_ = 0;
+};
+
+// Adds v to *p atomically: atomicAdd on the device, std::atomic_ref on the host, so the
+// functors below run under exec::omp as well as exec::cuda. Fixed amounts are added as
+// unsigned: two's complement addition wraps to the same bits as the signed sum.
+FREEFORM_HD inline void atomic_add(unsigned long long* p, unsigned long long v) {
+#if defined(__CUDA_ARCH__)
+    atomicAdd(p, v);
+#else
+    std::atomic_ref<unsigned long long>(*p).fetch_add(v, std::memory_order_relaxed);
+#endif
+}
+
+// Where a trace's weight went, accumulated per ray with atomics. Each lane is a copy of
+// the counters; ray k adds to lane k % totals_lanes, so the threads of a warp spread over
+// different addresses instead of queueing on one.
+inline constexpr int totals_lanes = 32;
+inline constexpr int totals_slots = 8;  // weight by RayStatus (0..5), rays on the receiver, spare
+inline constexpr int totals_hits_slot = 6;
+
+// The deposit target of `deposit`: one fixed-point histogram cell per index.
+struct AtomicCells {
+    unsigned long long* cells;
+    FREEFORM_HD void operator()(std::int64_t c, Fixed amount) const {
+        if (amount != 0) atomic_add(cells + c, static_cast<unsigned long long>(amount));
+    }
+};
+
+// Ray k of the ray set: traced, counted in the totals and deposited. The same functor
+// runs under for_each(exec::cuda, ...) over device pointers and under exec::seq/omp over
+// host pointers.
+template <class View>
+struct TraceDepositKernel {
+    View hf;
+    PathParams pp;
+    const Vec3* origin;
+    const Vec3* direction;
+    const Fixed* weight;
+    unsigned long long* cells;   // receiver width * height, zeroed
+    unsigned long long* totals;  // totals_lanes * totals_slots, zeroed
+
+    FREEFORM_HD void operator()(std::int64_t k) const {
+        const RayRecord rec = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
+        const Fixed w = weight[k];
+        unsigned long long* lane = totals + (k % totals_lanes) * totals_slots;
+        atomic_add(lane + int(rec.status), static_cast<unsigned long long>(w));
+        if (rec.status != RayStatus::receiver) return;
+        atomic_add(lane + totals_hits_slot, 1ull);
+        deposit(pp.receiver, rec.px, rec.py, w, AtomicCells{cells});
+    }
+};
+
+// The record of ray ids[k] into records[k].
+template <class View>
+struct TraceRecordsKernel {
+    View hf;
+    PathParams pp;
+    const Vec3* origin;
+    const Vec3* direction;
+    const std::int32_t* ids;
+    RayRecord* records;
+
+    FREEFORM_HD void operator()(std::int64_t k) const {
+        const std::int32_t id = ids[k];
+        records[k] = trace_heightfield_ray(hf, pp, origin[id], direction[id], NoCellVisitor{});
+    }
+};
+
+// Folds the lanes of a totals buffer into TraceTotals (emitted is left to the caller).
+inline TraceTotals fold_totals(std::span<const unsigned long long> lanes, std::int64_t rays) {
+    TraceTotals t;
+    t.rays = rays;
+    for (int l = 0; l < totals_lanes; ++l) {
+        const unsigned long long* lane = lanes.data() + std::size_t(l) * totals_slots;
+        for (std::size_t s = 0; s < t.weight_by_status.size(); ++s)
+            t.weight_by_status[s] = Fixed(std::uint64_t(t.weight_by_status[s]) + lane[s]);
+        t.rays_hit_receiver += std::int64_t(lane[totals_hits_slot]);
+    }
+    return t;
+}
+
+// Device pointers to a ray set, for kernels of one's own.
+struct DeviceRays {
+    const Vec3* origin = nullptr;
+    const Vec3* direction = nullptr;
+    const Fixed* weight = nullptr;
+    std::int64_t size = 0;
+};
+
+// The height-field tracer with a device copy of the surface and the rays.
+//
+// With exec::cuda_t the work runs on the GPU; with exec::seq / exec::omp it runs on the
+// CPU exactly as HeightfieldTracer does, so the class satisfies the Tracer concept and
+// can stand in for HeightfieldTracer anywhere. The surface and the rays are referenced,
+// not copied: they must outlive the tracer, and every height change must be followed by
+// surface_changed() (and a new ray set by rays_changed()) before the next GPU trace.
+//
+// The device copy belongs to the device that was current at construction; use the
+// tracer with that device current. A tracer holds scratch buffers for its GPU calls: one
+// GPU call at a time per tracer (CPU calls may overlap as with HeightfieldTracer).
+class DeviceHeightfieldTracer {
+public:
+    DeviceHeightfieldTracer(const Heightmap& surface, const RaySet& rays, const PathParams& params)
+        : surface_(&surface), rays_(&rays), params_(params) {
+        if (rays.direction.size() != rays.origin.size() || rays.weight.size() != rays.origin.size())
+            throw InputError("DeviceHeightfieldTracer: the ray set has " + std::to_string(rays.origin.size()) +
+                             " origins, " + std::to_string(rays.direction.size()) + " directions and " +
+                             std::to_string(rays.weight.size()) + " weights");
+        heights_ = DeviceBuffer<float>(std::span(surface.heights()));
+        normals_ = DeviceBuffer<Vec3>(std::span(surface.normals()));
+        if (surface.aperture() != Aperture::rect) mask_ = DeviceBuffer<std::uint8_t>(std::span(surface.cell_mask()));
+        upload_rays();
+        totals_.resize(std::size_t(totals_lanes) * totals_slots);
+    }
+
+    static constexpr std::string_view name() { return "heightfield-cuda"; }
+    const RaySet& rays() const { return *rays_; }
+    const PathParams& params() const { return params_; }
+    const Heightmap& surface() const { return *surface_; }
+
+    // The CPU tracer over the same surface, rays and physics.
+    HeightfieldTracer host_tracer() const { return HeightfieldTracer(*surface_, *rays_, params_); }
+
+    // The device copy of the surface and rays, for kernels of one's own.
+    HeightfieldView device_view() const {
+        HeightfieldView v = surface_->view();
+        v.h = heights_.data();
+        v.n = normals_.data();
+        v.cell_on = mask_.empty() ? nullptr : mask_.data();
+        return v;
+    }
+    DeviceRays device_rays() const {
+        return {origin_.data(), direction_.data(), weight_.data(), std::int64_t(origin_.size())};
+    }
+
+    // Copies the heights of `patch` and the normals they affect (its normal support) to
+    // the device. Call after changing the host heights (and normals) in `patch`.
+    void surface_changed(const Patch& patch) {
+        const Heightmap& s = *surface_;
+        upload_rect(heights_, s.heights(), patch.clipped(s.nx(), s.ny()));
+        upload_rect(normals_, s.normals(), s.normal_support(patch));
+    }
+    // Copies the whole ray set again (after the RaySet was regenerated).
+    void rays_changed() { upload_rays(); }
+
+    // Traces every ray into `out` (receiver-sized) and `totals`.
+    void trace_all(exec::cuda_t policy, Histogram& out, TraceTotals& totals) const {
+        check_histogram(out);
+        const std::int64_t n = rays_->size();
+        cells_.resize(out.cells.size());
+        cells_.zero(policy.stream);
+        totals_.zero(policy.stream);
+        policy.synchronize = false;  // the downloads below wait for the kernel
+        for_each(policy, n,
+                 TraceDepositKernel<HeightfieldView>{device_view(), params_, origin_.data(), direction_.data(),
+                                                     weight_.data(), cells_.data(), totals_.data()});
+        static_assert(sizeof(Fixed) == sizeof(unsigned long long));
+        std::array<unsigned long long, std::size_t(totals_lanes) * totals_slots> lanes{};
+        check(cudaMemcpyAsync(out.cells.data(), cells_.data(), cells_.size() * sizeof(Fixed), cudaMemcpyDeviceToHost,
+                              policy.stream),
+              "DeviceHeightfieldTracer::trace_all: histogram download");
+        check(cudaMemcpyAsync(lanes.data(), totals_.data(), sizeof(lanes), cudaMemcpyDeviceToHost, policy.stream),
+              "DeviceHeightfieldTracer::trace_all: totals download");
+        check(cudaStreamSynchronize(policy.stream), "DeviceHeightfieldTracer::trace_all");
+        totals = fold_totals(lanes, n);
+        totals.emitted = rays_->total;
+    }
+
+    // Traces the rays `ids` into `records` (records[k] belongs to ids[k]).
+    void trace(exec::cuda_t policy, std::span<const std::int32_t> ids, std::span<RayRecord> records) const {
+        trace_records(policy, device_view(), ids, records);
+    }
+
+    // The same against the surface as `overlay` would leave it (incremental evaluation of
+    // a proposed move, surface/overlay.hpp), without changing the device surface.
+    void trace(exec::cuda_t policy, std::span<const std::int32_t> ids, std::span<RayRecord> records,
+               const HeightOverlay& overlay) const {
+        OverlayView v = overlay_view(*surface_, overlay);
+        static_cast<HeightfieldView&>(v) = device_view();
+        overlay_heights_.resize(overlay.heights.size());
+        overlay_normals_.resize(overlay.normals.size());
+        overlay_heights_.upload(std::span(overlay.heights), 0, policy.stream);
+        overlay_normals_.upload(std::span(overlay.normals), 0, policy.stream);
+        v.oh = overlay_heights_.data();
+        v.on = overlay_normals_.data();
+        trace_records(policy, v, ids, records);
+    }
+
+    // The CPU versions: HeightfieldTracer's, on the host copy of the surface.
+    template <HostPolicy P>
+    void trace_all(P policy, Histogram& out, TraceTotals& totals) const {
+        host_tracer().trace_all(policy, out, totals);
+    }
+    template <HostPolicy P>
+    void trace(P policy, std::span<const std::int32_t> ids, std::span<RayRecord> records) const {
+        host_tracer().trace(policy, ids, records);
+    }
+    template <HostPolicy P>
+    void trace(P policy, std::span<const std::int32_t> ids, std::span<RayRecord> records,
+               const HeightOverlay& overlay) const {
+        check_ids(ids, records);
+        const OverlayView v = overlay_view(*surface_, overlay);
+        for_each(policy, std::int64_t(ids.size()),
+                 TraceRecordsKernel<OverlayView>{v, params_, rays_->origin.data(), rays_->direction.data(),
+                                                 ids.data(), records.data()});
+    }
+
+private:
+    void upload_rays() {
+        const RaySet& r = *rays_;
+        origin_.resize(r.origin.size());
+        direction_.resize(r.direction.size());
+        weight_.resize(r.weight.size());
+        origin_.upload(std::span(r.origin));
+        direction_.upload(std::span(r.direction));
+        weight_.upload(std::span(r.weight));
+    }
+
+    // Copies the rows of `p` (vertex indices, clipped) of a row-major nx-wide grid.
+    template <class T>
+    void upload_rect(DeviceBuffer<T>& dst, const std::vector<T>& src, const Patch& p) {
+        if (p.empty()) return;
+        const std::size_t nx = std::size_t(surface_->nx());
+        const std::size_t first = std::size_t(p.j0) * nx + std::size_t(p.i0);
+        check(cudaMemcpy2D(dst.data() + first, nx * sizeof(T), src.data() + first, nx * sizeof(T),
+                           std::size_t(p.width()) * sizeof(T), std::size_t(p.height()), cudaMemcpyHostToDevice),
+              "DeviceHeightfieldTracer::surface_changed");
+    }
+
+    void check_histogram(const Histogram& out) const {
+        const ReceiverView& rv = params_.receiver;
+        if (out.width != rv.width || out.height != rv.height ||
+            out.cells.size() != std::size_t(rv.width) * std::size_t(rv.height))
+            throw InputError("DeviceHeightfieldTracer::trace_all: histogram is " + std::to_string(out.width) + " x " +
+                             std::to_string(out.height) + ", the receiver is " + std::to_string(rv.width) + " x " +
+                             std::to_string(rv.height));
+    }
+
+    // Bad ids would read outside the device arrays and poison the CUDA context; they are
+    // rejected on the host first.
+    void check_ids(std::span<const std::int32_t> ids, std::span<RayRecord> records) const {
+        if (records.size() != ids.size())
+            throw InputError("DeviceHeightfieldTracer::trace: " + std::to_string(ids.size()) + " ids but " +
+                             std::to_string(records.size()) + " records");
+        const std::int64_t n = rays_->size();
+        for (const std::int32_t id : ids)
+            if (id < 0 || id >= n)
+                throw InputError("DeviceHeightfieldTracer::trace: ray id " + std::to_string(id) +
+                                 " is outside the ray set [0, " + std::to_string(n) + ")");
+    }
+
+    template <class View>
+    void trace_records(exec::cuda_t policy, const View& view, std::span<const std::int32_t> ids,
+                       std::span<RayRecord> records) const {
+        check_ids(ids, records);
+        if (ids.empty()) return;
+        ids_.resize(ids.size());
+        records_.resize(ids.size());
+        ids_.upload(ids, 0, policy.stream);
+        policy.synchronize = false;  // the download below waits for the kernel
+        for_each(policy, std::int64_t(ids.size()),
+                 TraceRecordsKernel<View>{view, params_, origin_.data(), direction_.data(), ids_.data(),
+                                          records_.data()});
+        records_.download(records, 0, policy.stream);
+        check(cudaStreamSynchronize(policy.stream), "DeviceHeightfieldTracer::trace");
+    }
+
+    const Heightmap* surface_;
+    const RaySet* rays_;
+    PathParams params_;
+    DeviceBuffer<float> heights_;
+    DeviceBuffer<Vec3> normals_;
+    DeviceBuffer<std::uint8_t> mask_;  // empty for a rectangular aperture
+    DeviceBuffer<Vec3> origin_, direction_;
+    DeviceBuffer<Fixed> weight_;
+    // Scratch of the GPU calls (hence mutable: the calls are logically const).
+    mutable DeviceBuffer<unsigned long long> cells_, totals_;
+    mutable DeviceBuffer<std::int32_t> ids_;
+    mutable DeviceBuffer<RayRecord> records_;
+    mutable DeviceBuffer<float> overlay_heights_;
+    mutable DeviceBuffer<Vec3> overlay_normals_;
+};
+
+static_assert(Tracer<DeviceHeightfieldTracer>, "DeviceHeightfieldTracer must satisfy the Tracer concept");
+
+}  // namespace freeform::cuda
