@@ -1,7 +1,7 @@
 // A fabrication constraint of your own, added to the objective: keep the rim of a mirror
 // flat, so that it can sit on a flat mounting frame.
 //
-//   build/release/bin/custom_term [ITERATIONS_PER_STAGE] [OUTPUT_DIR]   (8000, custom_term_out)
+//   build/release/bin/custom_term [ITERATIONS_PER_STAGE] [OUTPUT_DIR]   (4000, custom_term_out)
 //
 // Any type with name(), radius() and cost(heights, i, j) is a LocalHeightTerm
 // (objective/penalty.hpp): the objective keeps the sum of its per-vertex costs exact
@@ -15,10 +15,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <utility>
+#include <vector>
 
 #include <freeform/anneal.hpp>
 #include <freeform/design/problem.hpp>
@@ -70,9 +74,9 @@ double term_value(const Heightmap& hm, const FlatRimTerm& term) {
 }
 
 // An initial temperature at which a typical uphill move is accepted with probability
-// 0.1, from a few trial moves that are evaluated but never applied (delta() changes
-// nothing). design() does the same for each of its stages.
-double calibrate(ReflectorProblem& problem, std::uint64_t seed) {
+// `acceptance`, from a few trial moves that are evaluated but never applied (delta()
+// changes nothing). design() does the same for each of its stages.
+double calibrate(ReflectorProblem& problem, std::uint64_t seed, double acceptance) {
     ReflectorProblem::Move m;
     double sum = 0;
     int up = 0;
@@ -81,7 +85,7 @@ double calibrate(ReflectorProblem& problem, std::uint64_t seed) {
         problem.propose(rng, 1.0, m);
         if (const double d = problem.delta(m); d > 0) sum += d, ++up;
     }
-    return std::max(up > 0 ? sum / up : 1e-6, 1e-12) / -std::log(0.1);
+    return std::max(up > 0 ? sum / up : 1e-6, 1e-12) / -std::log(acceptance);
 }
 
 struct LevelResult {
@@ -113,15 +117,19 @@ LevelResult design_level(const Scene& scene, const ImageD& target, const Penalti
         ReflectorProblem problem(out.surface, rays, params, make_target(target, rec.width, rec.height, rays.total),
                                  ObjectiveWeights{}, penalties, proposals, make_bandit("history", arms), unit, 1.0);
         const std::uint64_t seed = hash_combine(scene.optimise.seed, stage);
-        const double t0 = calibrate(problem, seed);
+        const double t0 = calibrate(problem, seed, scene.optimise.initial_acceptance);
         problem.set_reference_temperature(t0);  // move amplitudes shrink as T falls below t0
 
+        // The schedule design() would use, from the scene's optimise block.
+        const OptimiseSpec& opt = scene.optimise;
         AnnealOptions o;
         o.seed = seed;
         o.initial_temperature = t0;
+        o.cooling = opt.cooling;
         o.max_iterations = iterations_per_stage;  // an iteration cap: the same result on any machine
-        o.iterations_per_temperature = std::max<std::int64_t>(1, iterations_per_stage / 120);
-        o.patience = std::max<std::int64_t>(100, iterations_per_stage / 12);
+        o.iterations_per_temperature = std::max<std::int64_t>(1, iterations_per_stage / opt.temperature_steps);
+        o.patience = std::max<std::int64_t>(100, std::int64_t(opt.patience_fraction * double(iterations_per_stage)));
+        o.reheat_factor = opt.reheat_factor;
         o.speculative = 4;  // proposals judged at once: faster, and the same trajectory
         const AnnealResult r = anneal(problem, o);
         out.value = problem.value();
@@ -151,20 +159,24 @@ void save(const std::filesystem::path& dir, const std::string& name, const Level
 }  // namespace
 
 int main(int argc, char** argv) try {
-    const std::int64_t iterations = argc > 1 ? std::atoll(argv[1]) : 8000;
+    const std::int64_t iterations = argc > 1 ? std::atoll(argv[1]) : 4000;
     const std::filesystem::path out = argc > 2 ? argv[2] : "custom_term_out";
     if (iterations < 1) throw InputError("ITERATIONS_PER_STAGE: must be a positive integer");
+    std::filesystem::create_directories(out);  // before the runs: fail early on a bad path
 
-    // A 10 cm mirror, collimated light, a 20 cm screen 0.5 m away, letter T.
+    // A 10 cm mirror, collimated light, a 20 cm screen 0.5 m away, letter T. The letter
+    // fills the middle half of the screen, where a flat mirror sends the light, so that
+    // one level from a flat start can draw it.
     Scene scene;
+    scene.light.rays_per_cell = 4;
     scene.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
     scene.surface.nx = scene.surface.ny = 51;
     scene.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
     scene.receiver.width = scene.receiver.height = 100;
-    const ImageD target = io::render_text("T", io::find_font("DejaVuSans-Bold"), 400, 400, 0.1).cast<double>();
+    const ImageD target = io::render_text("T", io::find_font("DejaVuSans-Bold"), 400, 400, 0.25).cast<double>();
 
     const FlatRimTerm rim;
-    const double rim_weight = 0.02;  // trades 1 um² of rim height against image error
+    const double rim_weight = 0.05;  // how much image error a unit of the term's mean cost is worth
     Penalties none;
     Penalties with_rim;
     with_rim.add(rim, rim_weight);  // a weight of 0 would leave the term out
@@ -182,7 +194,6 @@ int main(int argc, char** argv) try {
         std::printf("%-18s %8.4f %8.4f %12.1f %10.4f %8.1f\n", label, r->value.error, r->value.energy,
                     rim_rms_um(r->surface, rim.width), term_value(r->surface, rim), r->seconds);
 
-    std::filesystem::create_directories(out);
     save(out, "without", a, scene);
     save(out, "with", b, scene);
     std::printf("height and irradiance images in %s/\n", out.string().c_str());
@@ -190,4 +201,7 @@ int main(int argc, char** argv) try {
 } catch (const InputError& e) {
     std::fprintf(stderr, "custom_term: %s\n", e.what());
     return 2;
+} catch (const std::exception& e) {  // e.g. the output directory cannot be created
+    std::fprintf(stderr, "custom_term: %s\n", e.what());
+    return 1;
 }

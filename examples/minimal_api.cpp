@@ -6,6 +6,7 @@
 // Writes heightmap.pfm (heights in metres), surface.obj (the Phong-tessellated mirror,
 // the same surface the tracer saw) and irradiance.png, then prints error and energy.
 #include <cstdio>
+#include <exception>
 #include <filesystem>
 
 #include <freeform/design/designer.hpp>
@@ -15,6 +16,7 @@
 int main(int argc, char** argv) try {
     using namespace freeform;
     const std::filesystem::path out = argc > 1 ? argv[1] : "minimal_api_out";
+    std::filesystem::create_directories(out);  // before the design: fail early on a bad path
 
     // 1. The scene: light falling straight down on a 10 cm mirror at the origin, and a
     //    20 cm screen 0.5 m above it looking down (it does not block the light).
@@ -40,13 +42,13 @@ int main(int argc, char** argv) try {
     options.time_budget = 10;
     options.progress_every = 20000;
     const DesignResult r = design(scene, std::move(flat), target, options, [](const DesignProgress& p) {
-        std::printf("level %d/%d  iteration %7lld  error %.4f  energy %.4f\n", p.level + 1, p.levels,
-                    static_cast<long long>(p.iteration), p.error, p.energy);
+        std::printf("level %d/%d (mesh %3d, %3d px) kernel %2d  iteration %6lld  error %.4f  energy %.4f\n",
+                    p.level + 1, p.levels, p.mesh, p.resolution, p.kernel_support, static_cast<long long>(p.iteration),
+                    p.error, p.energy);
         return false;  // true would stop the design (the best state so far is kept)
     });
 
     // 4. Save. PFM rows run top to bottom, so image row 0 is the +v edge (grid row ny-1).
-    std::filesystem::create_directories(out);
     const Heightmap& hm = r.surface;
     ImageF heights(hm.ny(), hm.nx());
     for (int j = 0; j < hm.ny(); ++j)
@@ -60,4 +62,7 @@ int main(int argc, char** argv) try {
 } catch (const freeform::InputError& e) {  // bad input or a file problem (IoError)
     std::fprintf(stderr, "minimal_api: %s\n", e.what());
     return 2;
+} catch (const std::exception& e) {  // e.g. the output directory cannot be created
+    std::fprintf(stderr, "minimal_api: %s\n", e.what());
+    return 1;
 }

@@ -53,11 +53,19 @@ concept Tracer = requires(const T& ct, T& t, Histogram& hist, TraceTotals& total
     t.surface_changed(patch);
 };
 
+// Adds deposits to a container of cells (a struct, not a lambda, so that nvcc sees a
+// FREEFORM_HD call operator when this header is part of a CUDA translation unit).
+template <class Cells>
+struct AddToCells {
+    Cells* cells;
+    FREEFORM_HD void operator()(std::int64_t c, Fixed a) const { (*cells)[std::size_t(c)] += a; }
+};
+
 // Deposits one record's weight (no-op unless it reached the receiver).
 template <class Cells>
 inline void deposit_record(const ReceiverView& rv, const RayRecord& r, Fixed w, Cells& cells) {
     if (r.status != RayStatus::receiver) return;
-    deposit(rv, r.px, r.py, w, [&](std::int64_t c, Fixed a) { cells[std::size_t(c)] += a; });
+    deposit(rv, r.px, r.py, w, AddToCells<Cells>{&cells});
 }
 
 // Adds up the per-thread histograms and totals of a parallel trace. The sums are exact

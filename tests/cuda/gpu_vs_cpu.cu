@@ -1,0 +1,202 @@
+// GPU against CPU, bit for bit (ctest `cuda_gpu_vs_cpu`, run by tests/cuda/run.cmake
+// only where `nvidia-smi -L` lists a device; `cuda_compile` compiles it everywhere).
+//
+// Several scenes (flat mirror, paraboloid, point light, lens, interreflecting bumps under
+// a disk light; gpu_vs_cpu_host.cpp) are traced by the CPU HeightfieldTracer, compiled by
+// the host compiler in gpu_vs_cpu_host.cpp, and by the GPU DeviceHeightfieldTracer;
+// histograms, totals and per-ray records must be equal to the last bit. Neither side may
+// contract a*b+c into an FMA (--fmad=false here, -ffp-contract=off there). The device
+// functors are also run on the host first, over host memory, so their logic is checked
+// even on a machine without a GPU.
+//
+// Exit status: 0 all equal, 1 a mismatch or an error, 77 no CUDA device (after the host
+// checks passed), printed as "no CUDA device: skipped".
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include <freeform/core/rng.hpp>
+#include <freeform/cuda.hpp>
+#include <freeform/trace/setup.hpp>
+
+#include "gpu_vs_cpu.hpp"
+
+namespace {
+
+using namespace freeform;
+using namespace freeform::gpu_test;
+
+constexpr int exit_skipped = 77;
+
+int failures = 0;
+
+void expect(bool ok, const std::string& what) {
+    if (ok) return;
+    ++failures;
+    std::fprintf(stderr, "FAIL: %s\n", what.c_str());
+}
+
+bool same_totals(const TraceTotals& a, const TraceTotals& b) {
+    return a.rays == b.rays && a.rays_hit_receiver == b.rays_hit_receiver && a.emitted == b.emitted &&
+           a.weight_by_status == b.weight_by_status;
+}
+
+// The GPU's deposit functor run on the host over host memory.
+template <class P>
+Reference host_run_of_device_kernel(const Case& c, const PathParams& pp, P policy) {
+    const RaySet& r = c.rays;
+    std::vector<unsigned long long> cells(std::size_t(pp.receiver.width) * pp.receiver.height, 0);
+    std::vector<unsigned long long> lanes(std::size_t(cuda::totals_lanes) * cuda::totals_slots, 0);
+    for_each(policy, r.size(),
+             cuda::TraceDepositKernel<HeightfieldView>{c.surface.view(), pp, r.origin.data(), r.direction.data(),
+                                                       r.weight.data(), cells.data(), lanes.data()});
+    Reference t{Histogram(pp.receiver.width, pp.receiver.height), cuda::fold_totals(lanes, r.size())};
+    t.totals.emitted = r.total;
+    for (std::size_t k = 0; k < cells.size(); ++k) t.histogram.cells[k] = Fixed(cells[k]);
+    return t;
+}
+
+std::vector<std::int32_t> every_ray(const RaySet& r) {
+    std::vector<std::int32_t> ids(std::size_t(r.size()));
+    for (std::size_t k = 0; k < ids.size(); ++k) ids[k] = std::int32_t(k);
+    return ids;
+}
+
+void host_checks(const Case& c) {
+    const PathParams pp = make_path_params(c.scene);
+    const Reference ref = cpu_trace_all(c);
+    expect(ref.totals.rays_hit_receiver > 0, c.name + ": some rays reach the receiver");
+    for (const bool omp : {false, true}) {
+        const Reference h =
+            omp ? host_run_of_device_kernel(c, pp, exec::omp) : host_run_of_device_kernel(c, pp, exec::seq);
+        const std::string how = omp ? " (exec::omp)" : " (exec::seq)";
+        expect(h.histogram == ref.histogram, c.name + ": device functor on the host, histogram" + how);
+        expect(same_totals(h.totals, ref.totals), c.name + ": device functor on the host, totals" + how);
+    }
+    // Where the weight went (receiver, missed receiver, missed surface, TIR, depth,
+    // absorbed), to show what the scene exercises.
+    std::string split;
+    for (const Fixed w : ref.totals.weight_by_status) {
+        char share[16];
+        std::snprintf(share, sizeof share, " %.1f%%", 100.0 * double(w) / double(ref.totals.emitted));
+        split += share;
+    }
+    std::printf("%-43s %7lld rays, weight by status%s: host run of the device functor == CPU\n", c.name.c_str(),
+                static_cast<long long>(ref.totals.rays), split.c_str());
+}
+
+void gpu_checks(Case& c, cudaStream_t stream) {
+    const PathParams pp = make_path_params(c.scene);
+    cuda::DeviceHeightfieldTracer gpu(c.surface, c.rays, pp);
+    const int w = c.scene.receiver.width, h = c.scene.receiver.height;
+
+    const Reference ref = cpu_trace_all(c);
+    for (const exec::cuda_t policy : {exec::cuda, exec::cuda_t{stream, 128, true}, exec::cuda_t{stream, 64, false}}) {
+        Reference g{Histogram(w, h), {}};
+        gpu.trace_all(policy, g.histogram, g.totals);
+        const std::string how = " (block_size " + std::to_string(policy.block_size) + ")";
+        expect(g.histogram == ref.histogram, c.name + ": GPU histogram" + how);
+        expect(same_totals(g.totals, ref.totals), c.name + ": GPU totals" + how);
+    }
+
+    // Records of a subset, in a scrambled order with repeats.
+    std::vector<std::int32_t> ids;
+    for (std::int64_t k = c.rays.size() - 1; k >= 0; k -= 3) ids.push_back(std::int32_t(k));
+    ids.push_back(0);
+    ids.push_back(0);
+    std::vector<RayRecord> on_gpu(ids.size());
+    gpu.trace(exec::cuda, ids, on_gpu);
+    expect(on_gpu == cpu_trace(c, ids), c.name + ": GPU records of a subset");
+
+    // A proposed move, traced through an overlay, then committed.
+    const HeightOverlay o = bump_overlay(c.surface);
+    const std::vector<std::int32_t> all = every_ray(c.rays);
+    std::vector<RayRecord> preview_gpu(all.size()), preview_host(all.size());
+    gpu.trace(exec::cuda_t{stream}, all, preview_gpu, o);
+    gpu.trace(exec::seq, all, preview_host, o);
+    const std::vector<RayRecord> preview_cpu = cpu_trace(c, all, o);
+    expect(preview_gpu == preview_cpu, c.name + ": GPU records through an overlay");
+    expect(preview_host == preview_cpu, c.name + ": host records through an overlay");
+    o.commit(c.surface);
+    gpu.surface_changed(o.patch);
+    expect(preview_cpu == cpu_trace(c, all), c.name + ": overlay preview equals the committed surface");
+    const Reference after_cpu = cpu_trace_all(c);
+    Reference after_gpu{Histogram(w, h), {}};
+    gpu.trace_all(exec::cuda, after_gpu.histogram, after_gpu.totals);
+    expect(after_gpu.histogram == after_cpu.histogram, c.name + ": GPU histogram after surface_changed");
+    expect(same_totals(after_gpu.totals, after_cpu.totals), c.name + ": GPU totals after surface_changed");
+    expect(!(after_cpu.histogram == ref.histogram), c.name + ": the move changed the histogram");
+    std::printf("%-43s GPU == CPU (histogram, totals, records, overlay, surface_changed)\n", c.name.c_str());
+}
+
+// for_each(exec::cuda) itself: every index exactly once for n far beyond one grid, the
+// same __host__ __device__ lambda on both sides, and launch errors as exceptions.
+void policy_checks() {
+    const std::int64_t n = 5'000'003;
+    cuda::DeviceBuffer<std::uint64_t> d_out{static_cast<std::size_t>(n)};
+    d_out.zero();
+    std::uint64_t* out = d_out.data();
+    const std::uint64_t seed = 42;
+    const auto f = [=] __host__ __device__(std::int64_t i) {
+        CounterRng rng(seed, std::uint64_t(i));
+        out[i] += std::uint64_t(rng.below(1000)) + 1000 * std::uint64_t(i);
+    };
+    for_each(exec::cuda, n, f);
+    const std::vector<std::uint64_t> gpu = d_out.to_host();
+    std::vector<std::uint64_t> cpu(std::size_t(n), 0);
+    out = cpu.data();
+    const auto g = [=] __host__ __device__(std::int64_t i) {
+        CounterRng rng(seed, std::uint64_t(i));
+        out[i] += std::uint64_t(rng.below(1000)) + 1000 * std::uint64_t(i);
+    };
+    for_each(exec::seq, n, g);
+    expect(gpu == cpu, "for_each(exec::cuda) visits every index once and matches exec::seq");
+
+    bool threw = false;
+    std::uint64_t* dev = d_out.data();
+    try {
+        for_each(exec::cuda_t{nullptr, 4096, true}, 10, [=] __device__(std::int64_t i) { dev[i] = 0; });
+    } catch (const CudaError& e) {
+        threw = true;
+        std::printf("expected error: %s\n", e.what());
+    }
+    expect(threw, "an impossible block size is reported as CudaError");
+    expect(cudaGetLastError() == cudaSuccess, "a failed launch leaves no sticky error");
+    std::printf("for_each(exec::cuda): grid-stride coverage, host/device lambda, launch errors: ok\n");
+}
+
+}  // namespace
+
+int main() {
+    try {
+        std::vector<Case> cases = make_cases();
+        for (const Case& c : cases) host_checks(c);
+        if (failures) {
+            std::fprintf(stderr, "%d check(s) failed\n", failures);
+            return 1;
+        }
+        if (cuda::device_count() == 0) {
+            std::printf("no CUDA device: skipped\n");
+            return exit_skipped;
+        }
+        cudaDeviceProp prop{};
+        cuda::check(cudaGetDeviceProperties(&prop, 0), "cudaGetDeviceProperties");
+        std::printf("device 0: %s (sm_%d%d)\n", prop.name, prop.major, prop.minor);
+        cudaStream_t stream = nullptr;
+        cuda::check(cudaStreamCreate(&stream), "cudaStreamCreate");
+        policy_checks();
+        for (Case& c : cases) gpu_checks(c, stream);
+        cuda::check(cudaStreamDestroy(stream), "cudaStreamDestroy");
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "error: %s\n", e.what());
+        return 1;
+    }
+    if (failures) {
+        std::fprintf(stderr, "%d check(s) failed\n", failures);
+        return 1;
+    }
+    std::printf("all GPU results equal the CPU bit for bit\n");
+    return 0;
+}

@@ -1,0 +1,42 @@
+#pragma once
+// Shared by the two halves of the GPU-against-CPU test: gpu_vs_cpu_host.cpp (compiled by
+// the host compiler, as the library's CPU build is) builds the scenes and traces them
+// with HeightfieldTracer; gpu_vs_cpu.cu traces them on the GPU and compares.
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <freeform/scene/rays.hpp>
+#include <freeform/scene/scene.hpp>
+#include <freeform/surface/overlay.hpp>
+#include <freeform/trace/path.hpp>
+#include <freeform/trace/tracer.hpp>
+
+namespace freeform::gpu_test {
+
+struct Case {
+    std::string name;
+    Scene scene;
+    Heightmap surface;
+    RaySet rays;
+};
+
+struct Reference {
+    Histogram histogram;
+    TraceTotals totals;
+};
+
+// Flat mirror, paraboloid, point light, lens, interreflecting bumps under a disk light.
+std::vector<Case> make_cases();
+
+// HeightfieldTracer on the CPU (exec::seq).
+Reference cpu_trace_all(const Case& c);
+std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids);
+// Through a proposed move, without changing c.surface.
+std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids, const HeightOverlay& o);
+
+// A move in the middle of the surface, as the annealer proposes them.
+HeightOverlay bump_overlay(const Heightmap& hm);
+
+}  // namespace freeform::gpu_test

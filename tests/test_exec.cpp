@@ -1,0 +1,172 @@
+// Execution policies (DESIGN.md §5): for_each runs a kernel written once as a FREEFORM_HD
+// functor serially or with OpenMP (and, in CUDA builds, on the GPU: tests/cuda/), and the
+// results do not depend on the policy.
+#include <doctest/doctest.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <freeform/core/exec.hpp>
+#include <freeform/core/hd.hpp>
+#include <freeform/cuda.hpp>  // a no-op for a host compiler
+#include <freeform/trace/heightfield_kernel.hpp>
+
+#include "support.hpp"
+
+using namespace freeform;
+using namespace freeform::testing;
+
+namespace {
+
+static_assert(!FREEFORM_HAS_CUDA_POLICY, "a host compiler sees no CUDA policy");
+static_assert(!FREEFORM_DEVICE_COMPILE);
+
+// The shape of every hot kernel: plain views in, one index per call, no allocation.
+struct TraceRecords {
+    HeightfieldView hf;
+    PathParams pp;
+    const Vec3* origin;
+    const Vec3* direction;
+    RayRecord* out;
+
+    FREEFORM_HD void operator()(std::int64_t k) const {
+        out[k] = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
+    }
+};
+
+// Trace and deposit in one functor, with the atomics of the GPU version (on the host:
+// std::atomic_ref). Signed fixed-point amounts are added as unsigned 64-bit integers.
+struct TraceDeposit {
+    HeightfieldView hf;
+    PathParams pp;
+    const Vec3* origin;
+    const Vec3* direction;
+    const Fixed* weight;
+    unsigned long long* cells;
+
+    FREEFORM_HD void operator()(std::int64_t k) const {
+        const RayRecord rec = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
+        if (rec.status != RayStatus::receiver) return;
+        unsigned long long* c = cells;
+        deposit(pp.receiver, rec.px, rec.py, weight[k], [c](std::int64_t i, Fixed a) {
+            std::atomic_ref<unsigned long long>(c[i]).fetch_add(static_cast<unsigned long long>(a),
+                                                                std::memory_order_relaxed);
+        });
+    }
+};
+
+struct WavyScene {
+    Scene scene;
+    Heightmap surface;
+    RaySet rays;
+};
+
+WavyScene wavy_scene(Deposit d) {
+    Scene s = basic_scene(80, 16);
+    s.receiver.deposit = d;
+    s.receiver.size = {0.4, 0.4};
+    s.light.shape = PointLight{{0.01, 0.0, 0.3}, {}, {}};
+    Heightmap hm = surface_for(s, 41);
+    shape(hm, [](double u, double v) { return 0.003 * std::sin(60 * u) * std::cos(45 * v); });
+    RaySet rays = generate_rays(s.light, hm, s.receiver, 3);
+    return {s, std::move(hm), std::move(rays)};
+}
+
+}  // namespace
+
+TEST_CASE("for_each visits every index exactly once under every policy") {
+    for (const std::int64_t n : {0, 1, 7, 1000, 100003}) {
+        std::vector<int> seen(std::size_t(n), 0);
+        for_each(exec::seq, n, [&](std::int64_t i) { ++seen[std::size_t(i)]; });
+        for (const int threads : {0, 1, 2, 3})
+            for_each(exec::omp_t{threads}, n, [&](std::int64_t i) { ++seen[std::size_t(i)]; });
+        bool all_five = true;
+        for (const int s : seen) all_five = all_five && s == 5;
+        CHECK(all_five);
+    }
+}
+
+TEST_CASE("for_each_chunk splits [0, n) into contiguous ranges fixed by n and chunks only") {
+    for (const int chunks : {1, 2, 3, 8}) {
+        const std::int64_t n = 1001;
+        const auto size = static_cast<std::size_t>(chunks);
+        std::vector<std::int64_t> begin_seq(size), end_seq(size), begin_omp(size), end_omp(size);
+        for_each_chunk(exec::seq, n, chunks, [&](int c, std::int64_t b, std::int64_t e) {
+            begin_seq[std::size_t(c)] = b, end_seq[std::size_t(c)] = e;
+        });
+        for_each_chunk(exec::omp_t{2}, n, chunks, [&](int c, std::int64_t b, std::int64_t e) {
+            begin_omp[std::size_t(c)] = b, end_omp[std::size_t(c)] = e;
+        });
+        CHECK(begin_seq == begin_omp);
+        CHECK(end_seq == end_omp);
+        CHECK(begin_seq.front() == 0);
+        CHECK(end_seq.back() == n);
+        for (int c = 1; c < chunks; ++c) CHECK(begin_seq[std::size_t(c)] == end_seq[std::size_t(c - 1)]);
+    }
+}
+
+TEST_CASE("a FREEFORM_HD trace functor gives the same records under exec::seq and exec::omp") {
+    const WavyScene w = wavy_scene(Deposit::bilinear);
+    const PathParams pp = make_path_params(w.scene);
+    const auto n = std::size_t(w.rays.size());
+    std::vector<RayRecord> seq(n), omp(n), tracer(n);
+    for_each(exec::seq, w.rays.size(),
+             TraceRecords{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(), seq.data()});
+    for_each(exec::omp_t{2}, w.rays.size(),
+             TraceRecords{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(), omp.data()});
+    CHECK(seq == omp);
+
+    // The same kernel is what HeightfieldTracer runs: its records and its histogram agree.
+    std::vector<std::int32_t> ids(n);
+    for (std::size_t k = 0; k < n; ++k) ids[k] = std::int32_t(k);
+    const HeightfieldTracer t(w.surface, w.rays, pp);
+    t.trace(exec::seq, ids, tracer);
+    CHECK(seq == tracer);
+
+    Histogram from_records(w.scene.receiver.width, w.scene.receiver.height);
+    TraceTotals totals_from_records;
+    for (std::size_t k = 0; k < n; ++k) {
+        totals_from_records.add(seq[k].status, w.rays.weight[k]);
+        deposit_record(pp.receiver, seq[k], w.rays.weight[k], from_records.cells);
+    }
+    const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::seq);
+    CHECK(from_records == full.histogram);
+    CHECK(totals_from_records.weight_by_status == full.totals.weight_by_status);
+    CHECK(totals_from_records.rays_hit_receiver == full.totals.rays_hit_receiver);
+    CHECK(full.totals.rays_hit_receiver > 1000);  // the scene does reach the receiver
+}
+
+TEST_CASE("trace-and-deposit with atomics equals HeightfieldTracer::trace_all, serial and parallel") {
+    for (const Deposit d : {Deposit::nearest, Deposit::bilinear}) {
+        const WavyScene w = wavy_scene(d);
+        const PathParams pp = make_path_params(w.scene);
+        const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::omp);
+        const std::size_t cells = full.histogram.cells.size();
+        std::vector<unsigned long long> seq(cells, 0), omp(cells, 0);
+        const auto functor = [&](unsigned long long* out) {
+            return TraceDeposit{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(),
+                                w.rays.weight.data(), out};
+        };
+        for_each(exec::seq, w.rays.size(), functor(seq.data()));
+        for_each(exec::omp_t{2}, w.rays.size(), functor(omp.data()));
+        CHECK(seq == omp);
+        Histogram h(w.scene.receiver.width, w.scene.receiver.height);
+        for (std::size_t k = 0; k < cells; ++k) h.cells[k] = Fixed(seq[k]);
+        CHECK(h == full.histogram);
+    }
+}
+
+TEST_CASE("unsigned 64-bit sums of signed fixed-point amounts wrap to the signed sum") {
+    // What the GPU histogram relies on: atomicAdd exists for unsigned long long only.
+    const std::vector<Fixed> amounts{to_fixed(1.5), to_fixed(-2.25), to_fixed(-1e6), to_fixed(3e5), -1, 1};
+    unsigned long long u = 0;
+    Fixed s = 0;
+    for (const Fixed a : amounts) {
+        u += static_cast<unsigned long long>(a);
+        s += a;
+        CHECK(Fixed(u) == s);
+    }
+    CHECK(s < 0);
+}
