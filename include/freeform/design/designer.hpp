@@ -5,8 +5,10 @@
 // Levels pair a mesh with a receiver resolution, coarse to fine (each level doubles
 // both, as in the reference's Table 6.1); inside a level the kernel support shrinks
 // stage by stage (coarse shape first, then detail). Between levels the surface is
-// refined by bilinear interpolation. Each stage is one annealing run of the generic
-// annealer on a ReflectorProblem; its initial temperature is calibrated from the
+// refined so that it keeps its shading normals (surface/refine.hpp), which preserves
+// its light better than bilinear interpolation of the heights. Each stage is one
+// annealing run of the generic annealer on a ReflectorProblem; its initial temperature
+// is calibrated from the
 // objective changes of a few trial moves so that about `initial_acceptance` of uphill
 // moves are accepted at the start, which keeps the defaults meaningful for any scene.
 #include <algorithm>
@@ -22,6 +24,7 @@
 #include "../objective/target.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
+#include "../surface/refine.hpp"
 #include "../trace/setup.hpp"
 #include "problem.hpp"
 
@@ -239,7 +242,7 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
 
     for (std::size_t li = 0; li < levels.size() && !stop; ++li) {
         const LevelPlan& level = levels[li];
-        surface = surface.resampled(level.mesh_x, level.mesh_y);
+        surface = refine_preserving_normals(surface, level.mesh_x, level.mesh_y);
         Receiver receiver = scene.receiver;
         receiver.width = level.resolution_x;
         receiver.height = level.resolution_y;
@@ -259,7 +262,7 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
         for (std::size_t si = 0; si < stages && !stop; ++si) {
             const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
             const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
-            const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold};
+            const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold, options.lost_light_weight};
             // The history bandit's pre-process (reference §4.3.2): a short run with every
             // shape equally likely, then only the shapes that paid best are kept.
             if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
@@ -410,7 +413,7 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
         if (stop && li + 1 < levels.size()) {
             // Stopped early: the surface is at this level's mesh; refine to the final
             // mesh so that exports have the size the user asked for, and re-evaluate.
-            surface = surface.resampled(levels.back().mesh_x, levels.back().mesh_y);
+            surface = refine_preserving_normals(surface, levels.back().mesh_x, levels.back().mesh_y);
         }
     }
     result.surface = std::move(surface);

@@ -7,7 +7,14 @@
 //   image    = error + sobel_weight * sum |Sobel(R - T)| / 8 / 2N    (eq. 4.5)
 //   energy   = weight on the receiver / N
 //   total    = image / energy if energy < threshold else image       (eq. 4.4)
+//              + lost_light_weight * (1 - energy) / 2
 //              + mean weighted penalty per vertex
+//
+// The lost-light term is ours. With T scaled to N, light put in a wrong cell costs its
+// weight twice in sum |R - T| (too much here, too little there), light thrown off the
+// receiver only once: left alone, the optimiser discards misplaced light down to the
+// energy threshold and beyond, since eq. 4.4 barely resists. Charging lost light the
+// missing half (weight 1) makes discarding no cheaper than misplacing.
 #include <algorithm>
 #include <cstdint>
 
@@ -20,6 +27,7 @@ namespace freeform {
 struct ObjectiveWeights {
     double sobel = 0.1;              // alpha of the Sobel term
     double energy_threshold = 0.95;  // below this energy the image error is divided by it
+    double lost_light = 1.0;         // weight of (1 - energy) / 2
 };
 
 struct ObjectiveValue {
@@ -41,7 +49,7 @@ inline ObjectiveValue combine(const ImageSums& s, Fixed n, double penalty, const
     v.penalty = penalty;
     double image = v.error + w.sobel * v.sobel;
     if (v.energy < w.energy_threshold) image /= std::max(v.energy, 1e-3);
-    v.total = image + penalty;
+    v.total = image + w.lost_light * 0.5 * (1.0 - v.energy) + penalty;
     return v;
 }
 

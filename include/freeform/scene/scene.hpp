@@ -77,6 +77,7 @@ struct OptimiseSpec {
     // Objective.
     double sobel_weight = 0.1;
     double energy_threshold = 0.95;
+    double lost_light_weight = 1.0;
     double height_bound_weight = 0;
     double valley_weight = 0;
     double valley_min_angle = 170;  // degrees
