@@ -87,7 +87,7 @@ Fixed sum_of(const std::vector<Fixed>& v) {
 // ------------------------------------------------------------------------- image terms
 
 TEST_CASE("L1 error and Sobel sum equal brute-force computations on random histograms") {
-    const ObjectiveWeights no_threshold{0.0, 0.0};
+    const ObjectiveWeights plain{0.0, 0.0, 0.0};  // no Sobel, no threshold, no lost-light term
     for (std::uint64_t seed = 1; seed <= 6; ++seed) {
         const int w = 5 + int(seed * 7 % 23), h = 4 + int(seed * 5 % 19);
         CAPTURE(seed);
@@ -107,14 +107,17 @@ TEST_CASE("L1 error and Sobel sum equal brute-force computations on random histo
         for (std::size_t k = 0; k < r.cells.size(); ++k) REQUIRE(state.difference(k) == r.cells[k] - t.cells[k]);
 
         // The normalised values of the objective.
-        const ObjectiveValue v = combine(state.sums(), n, 0.0, no_threshold);
+        const ObjectiveValue v = combine(state.sums(), n, 0.0, plain);
         CHECK(v.error == doctest::Approx(l1_brute_force(r, t) / (2.0 * double(n))).epsilon(1e-14));
         CHECK(v.sobel == doctest::Approx(sobel_brute_force(r, t) / (8.0 * 2.0 * double(n))).epsilon(1e-14));
         CHECK(v.energy == doctest::Approx(double(r.total()) / double(n)).epsilon(1e-15));
-        CHECK(v.total == doctest::Approx(v.error).epsilon(1e-15));  // sobel weight 0, no threshold
+        CHECK(v.total == doctest::Approx(v.error).epsilon(1e-15));
 
-        const ObjectiveValue with_sobel = combine(state.sums(), n, 0.0, ObjectiveWeights{0.3, 0.0});
+        const ObjectiveValue with_sobel = combine(state.sums(), n, 0.0, ObjectiveWeights{0.3, 0.0, 0.0});
         CHECK(with_sobel.total == doctest::Approx(v.error + 0.3 * v.sobel).epsilon(1e-14));
+        const ObjectiveValue with_lost = combine(state.sums(), n, 0.0, ObjectiveWeights{0.3, 0.0, 2.0});
+        CHECK(with_lost.total ==
+              doctest::Approx(v.error + 0.3 * v.sobel + 2.0 * 0.5 * (1.0 - v.energy)).epsilon(1e-14));
     }
 }
 
@@ -167,7 +170,7 @@ TEST_CASE("energy threshold: error / energy below the threshold, unchanged at or
     ImageSums s;
     s.l1 = to_fixed(200.0);     // error 0.1
     s.sobel = to_fixed(1600.0);  // sobel 0.1 after / 8 / 2N
-    const ObjectiveWeights w{0.5, 0.9};
+    const ObjectiveWeights w{0.5, 0.9, 0.0};  // the lost-light term is tested below
     const double image = 0.1 + 0.5 * 0.1;
     const double penalty = 0.02;
 
@@ -200,8 +203,55 @@ TEST_CASE("energy threshold: error / energy below the threshold, unchanged at or
 
     // A threshold of 0 turns the term off.
     s.on_receiver = to_fixed(100.0);
-    v = combine(s, n, 0.0, ObjectiveWeights{0.5, 0.0});
+    v = combine(s, n, 0.0, ObjectiveWeights{0.5, 0.0, 0.0});
     CHECK(v.total == doctest::Approx(image).epsilon(1e-14));
+}
+
+TEST_CASE("lost-light term: weight x (1 - energy) / 2, added after the energy threshold") {
+    const Fixed n = to_fixed(1000.0);
+    ImageSums s;
+    s.l1 = to_fixed(200.0);  // error 0.1
+    s.sobel = 0;
+    s.on_receiver = to_fixed(800.0);  // energy 0.8
+    const ObjectiveValue v = combine(s, n, 0.01, ObjectiveWeights{0.0, 0.9, 1.5});
+    CHECK(v.total == doctest::Approx(0.1 / 0.8 + 1.5 * 0.5 * 0.2 + 0.01).epsilon(1e-14));
+    // Nothing lost, nothing added; the defaults charge it with weight 1.
+    s.on_receiver = n;
+    CHECK(combine(s, n, 0.0, ObjectiveWeights{0.0, 0.9, 1.5}).total == doctest::Approx(0.1).epsilon(1e-14));
+    s.on_receiver = to_fixed(960.0);
+    CHECK(combine(s, n, 0.0, ObjectiveWeights{}).total ==
+          doctest::Approx(0.1 + 0.5 * 0.04).epsilon(1e-14));
+}
+
+TEST_CASE("with the lost-light weight 1, discarding light costs as much as misplacing it") {
+    // R = T, then one unit of light either moved to another cell or thrown away.
+    const int w = 6, h = 5;
+    const Fixed n = to_fixed(300.0);
+    const Target t = make_target(random_image(w, h, 21), w, h, n);
+    std::size_t from = 0;
+    while (t.cells[from] < to_fixed(2.0)) ++from;
+    const Fixed unit = to_fixed(1.0);
+    const ObjectiveWeights weights{0.0, 0.0, 1.0};
+
+    Histogram misplaced(w, h);
+    misplaced.cells = t.cells;
+    misplaced.cells[from] -= unit;
+    misplaced.cells[(from + 7) % misplaced.cells.size()] += unit;
+    Histogram discarded(w, h);
+    discarded.cells = t.cells;
+    discarded.cells[from] -= unit;
+
+    ImageState a(t), b(t);
+    a.reset(misplaced);
+    b.reset(discarded);
+    const ObjectiveValue va = combine(a.sums(), n, 0.0, weights), vb = combine(b.sums(), n, 0.0, weights);
+    CHECK(va.error == doctest::Approx(1.0 / 300.0).epsilon(1e-12));
+    CHECK(vb.error == doctest::Approx(0.5 / 300.0).epsilon(1e-12));
+    CHECK(vb.total == doctest::Approx(va.total).epsilon(1e-12));
+    // Without the term (the reference's objective) discarding is half the price.
+    const ObjectiveWeights reference{0.0, 0.0, 0.0};
+    CHECK(combine(b.sums(), n, 0.0, reference).total ==
+          doctest::Approx(0.5 * combine(a.sums(), n, 0.0, reference).total).epsilon(1e-12));
 }
 
 // ------------------------------------------------------------------------- targets

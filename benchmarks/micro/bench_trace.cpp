@@ -114,8 +114,15 @@ int all_threads() {
 #endif
 }
 
+// Not inlined, so that callgrind can count instructions inside it alone
+// (--toggle-collect='*trace_all_loop*'; see docs/performance.md).
+#if defined(_MSC_VER)
+#define FREEFORM_BENCH_NOINLINE __declspec(noinline)
+#else
+#define FREEFORM_BENCH_NOINLINE __attribute__((noinline))
+#endif
 template <class T>
-void trace_all_loop(benchmark::State& state, const T& tracer, const Case& c, int threads) {
+FREEFORM_BENCH_NOINLINE void trace_all_loop(benchmark::State& state, const T& tracer, const Case& c, int threads) {
     Histogram hist(c.scene.receiver.width, c.scene.receiver.height);
     TraceTotals totals;
     for (auto _ : state) {

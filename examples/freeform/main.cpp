@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -191,18 +192,36 @@ io::RgbImage comparison_image(const ImageD& result, const ImageD& target) {
 
 void write_json(const fs::path& file, const json& j) { io::write_file_atomically(file, j.dump(2) + "\n"); }
 
+// Refuses an output directory that cannot be created or written before any work is done,
+// so that a long design never fails at its end (nothing is created here).
+void check_output_dir(const fs::path& out) {
+    std::error_code ec;
+    if (fs::exists(out, ec) && !fs::is_directory(out, ec))
+        throw InputError("--out: " + out.string() + " exists and is not a directory");
+    fs::path p = fs::absolute(out, ec);
+    while (!p.empty() && !fs::exists(p, ec)) {
+        if (p == p.parent_path()) break;
+        p = p.parent_path();
+    }
+    if (!fs::is_directory(p, ec))
+        throw InputError("--out: cannot create " + out.string() + " (" + p.string() + " is not a directory)");
+    if (::access(p.c_str(), W_OK) != 0)
+        throw InputError("--out: cannot create " + out.string() + " (" + p.string() + " is not writable)");
+}
+
 // ---------------------------------------------------------------------------- render
 
 struct RenderArgs {
     fs::path scene, out, heightmap, mesh;
     std::string tracer;
     int threads = 0;
-    std::optional<std::uint64_t> seed;
+    std::optional<std::int64_t> seed;
 };
 
 int run_render(const RenderArgs& a) {
     Scene scene = io::load_scene(a.scene);
-    if (a.seed) scene.optimise.seed = *a.seed;
+    if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
+    check_output_dir(a.out);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
     const TracerChoice requested = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
@@ -284,7 +303,7 @@ int run_render(const RenderArgs& a) {
 
 struct DesignArgs {
     fs::path scene, out;
-    std::optional<std::uint64_t> seed;
+    std::optional<std::int64_t> seed;
     std::optional<double> time_budget;
     std::optional<int> threads;
     bool quiet = false;
@@ -292,7 +311,8 @@ struct DesignArgs {
 
 int run_design(const DesignArgs& a) {
     Scene scene = io::load_scene(a.scene);
-    if (a.seed) scene.optimise.seed = *a.seed;
+    if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
+    check_output_dir(a.out);
     if (a.time_budget) {
         if (!(*a.time_budget > 0)) throw InputError("--time-budget: must be > 0 seconds");
         scene.optimise.time_budget = *a.time_budget;
@@ -324,7 +344,8 @@ int run_design(const DesignArgs& a) {
         return interrupted.load();
     });
     status.finish();
-    std::signal(SIGINT, SIG_DFL);
+    // Keep catching Ctrl-C until the results are written: a second one must not leave
+    // half-written files (each file is written atomically, but the set should be whole).
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
 
     // Final evaluation at the scene's full resolution, with the scene's seed.
@@ -417,6 +438,7 @@ int run_design(const DesignArgs& a) {
         std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
                     a.out.string().c_str());
     }
+    std::signal(SIGINT, SIG_DFL);
     return result.stopped_early ? 130 : 0;
 }
 
@@ -436,8 +458,9 @@ int main(int argc, char** argv) {
     render->add_option("--heightmap", ra.heightmap, "trace this heightmap (PFM, surface frame heights in metres)");
     render->add_option("--mesh", ra.mesh, "trace this triangle mesh (OBJ, world coordinates) in place of the surface");
     render->add_option("--tracer", ra.tracer, "auto (default), heightfield or embree");
-    render->add_option("--threads", ra.threads, "worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
-    render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)");
+    render->add_option("--threads", ra.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
+    render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)")
+        ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
 
     DesignArgs da;
     CLI::App* design_cmd = app.add_subcommand("design", "optimise the surface so that its light matches the target");
@@ -446,18 +469,26 @@ int main(int argc, char** argv) {
                            "output directory (metrics.json, convergence.csv, heightmap.pfm, surface.obj/.stl, "
                            "irradiance.png, target.png, comparison.png)")
         ->required();
-    design_cmd->add_option("--seed", da.seed, "random seed (default: the scene's optimise.seed)");
+    design_cmd->add_option("--seed", da.seed, "random seed (default: the scene's optimise.seed)")
+        ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
     design_cmd->add_option("--time-budget", da.time_budget, "seconds (default: the scene's optimise.time_budget)");
-    design_cmd->add_option("--threads", da.threads, "worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    design_cmd->add_option("--threads", da.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");
 
     try {
         app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
     } catch (const CLI::ParseError& e) {
-        const int code = app.exit(e);
-        return code == 0 ? 0 : 2;
+        // One line, like every other input error (CLI11's own report adds a help hint).
+        std::fprintf(stderr, "freeform: %s (see freeform --help)\n", e.what());
+        return 2;
     }
     try {
         if (*render) return run_render(ra);

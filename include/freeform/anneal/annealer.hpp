@@ -686,7 +686,7 @@ private:
     std::int64_t next_progress_ = never;
     std::int64_t last_progress_ = -1;
     std::int64_t next_clock_check_ = 0;
-    std::int64_t clock_interval_ = 32;
+    std::int64_t clock_interval_ = 1;  // grows while reads come more often than every 0.5 ms
     double last_clock_seconds_ = 0;
 };
 

@@ -178,8 +178,9 @@ inline ProposalSettings proposals_for(const DesignOptions& o, int support, const
     p.max_shift_cells = o.max_shift_cells;
     p.min_shift_cells = o.min_shift_cells;
     if (!o.single_vertex) {
-        const auto bank = default_kernel_bank(std::max(3, support | 1));
-        if (kept.empty()) {
+        auto bank = default_kernel_bank(std::max(3, support | 1));
+        if (o.kernel_shapes == "isotropic") bank.resize(1);  // the reference's single-kernel baseline
+        if (kept.empty() || bank.size() == 1) {
             p.bank = bank;
         } else {
             for (int k : kept) p.bank.push_back(bank[std::size_t(k)]);
@@ -195,32 +196,37 @@ struct Calibration {
 
 // Initial temperature such that a typical uphill move is accepted with probability p,
 // from a few trial moves (evaluated, never applied); their timing estimates the speed.
-inline Calibration calibrate(ReflectorProblem& problem, std::uint64_t seed, double p) {
-    ReflectorProblem::Move m;
+template <class Problem>
+Calibration calibrate(Problem& problem, std::uint64_t seed, double p) {
+    typename Problem::Move m;
     double sum = 0;
     int up = 0;
     const auto start = std::chrono::steady_clock::now();
-    constexpr int trials = 48;
-    for (int k = 0; k < trials; ++k) {
-        CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(k));
+    const auto seconds_since = [&] {
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    };
+    // 48 trial moves, or fewer when moves are slow (at least 8): calibration must not eat
+    // a short stage.
+    int trials = 0;
+    for (; trials < 48 && (trials < 8 || seconds_since() < 0.15); ++trials) {
+        CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(trials));
         problem.propose(rng, 1.0, m);
         const double d = problem.delta(m);
         if (d > 0) sum += d, ++up;
     }
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double seconds = seconds_since();
     const double mean_up = up > 0 ? sum / up : 1e-6;
     return {std::max(mean_up, 1e-12) / -std::log(std::clamp(p, 1e-6, 0.999)), trials / std::max(seconds, 1e-9)};
 }
 
 }  // namespace design_detail
 
-// Designs the surface of `scene` so that its irradiance matches `target_image`
-// (relative irradiance, any resolution). `callback(const DesignProgress&)` is called
-// every options.progress_every iterations and may return true to stop (the best state
-// so far is kept); use a lambda returning bool, or a functor with that call operator.
-template <class Callback>
-DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
-                    Callback&& callback) {
+namespace design_detail {
+
+template <class Backend, class Callback>
+DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
+                         const DesignOptions& options, Callback&& callback) {
+    using Problem = BasicReflectorProblem<Backend>;
     using clock = std::chrono::steady_clock;
     const auto t_start = clock::now();
     const auto elapsed = [&] { return std::chrono::duration<double>(clock::now() - t_start).count(); };
@@ -266,10 +272,11 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
             // The history bandit's pre-process (reference §4.3.2): a short run with every
             // shape equally likely, then only the shapes that paid best are kept.
             if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
+                options.kernel_shapes != "isotropic" &&
                 options.preprocess_iterations > 0 && options.preprocess_keep > 0) {
                 ProposalSettings all = design_detail::proposals_for(options, support);
                 const int arms = int(all.bank.size());
-                ReflectorProblem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+                Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
                 const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), options.initial_acceptance);
                 pre.set_reference_temperature(cal.temperature);
@@ -294,7 +301,7 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
             }
             ProposalSettings ps = design_detail::proposals_for(options, support, kept_arms);
             const int arms = std::max<int>(1, int(ps.bank.size()));
-            ReflectorProblem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+            Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance);
@@ -323,15 +330,20 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
             // Iteration budget: with a time budget and no iteration cap, as many iterations
             // as the measured speed fits in the stage's time (so that the temperature
             // schedule completes); otherwise the plan's, which makes the run reproducible.
-            std::int64_t budget = std::max<std::int64_t>(1000, level.iterations / std::int64_t(stages));
+            std::int64_t budget = std::max<std::int64_t>(1, level.iterations / std::int64_t(stages));
             if (options.time_budget > 0 && options.max_iterations == 0) {
                 const double parallel = 1.0 + 0.6 * (std::min(speculative, threads) - 1);
                 budget = std::max<std::int64_t>(500, std::int64_t(0.9 * cal.moves_per_second * parallel * stage_time));
             }
             if (options.max_iterations > 0) {
+                // The cap is shared by every stage still to run, in proportion to the
+                // levels' time shares, so that no level is starved by an earlier one.
+                double remaining_share = level_share / double(stages);
+                for (std::size_t lk = li + 1; lk < levels.size(); ++lk) remaining_share += levels[lk].time_share;
+                remaining_share += level_share * double(stages - si - 1) / double(stages);
                 const std::int64_t left = options.max_iterations - total_iterations;
-                if (left <= 0) break;
-                budget = std::min(budget, std::max<std::int64_t>(1, left / std::int64_t(stages - si)));
+                const double mine = remaining_share > 0 ? (level_share / double(stages)) / remaining_share : 1.0;
+                budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
             }
             ao.max_iterations = budget;
             ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
@@ -347,9 +359,9 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
             const std::int64_t base_iteration = total_iterations;
             struct Hooks {
                 const DesignResult* result;
-                ReflectorProblem* problem;
+                Problem* problem;
                 std::vector<ConvergencePoint>* convergence;
-                Callback* user;
+                std::remove_reference_t<Callback>* user;
                 DesignProgress info;
                 std::int64_t base;
                 double stage_start;
@@ -411,15 +423,50 @@ DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_
         }
         share_used += level_share;
         if (stop && li + 1 < levels.size()) {
-            // Stopped early: the surface is at this level's mesh; refine to the final
-            // mesh so that exports have the size the user asked for, and re-evaluate.
-            surface = refine_preserving_normals(surface, levels.back().mesh_x, levels.back().mesh_y);
+            // Stopped early: the surface is at this level's mesh; refine it to the final
+            // mesh so that exports have the size the user asked for, and evaluate it
+            // there, so that the result's irradiance, target and value describe it.
+            const LevelPlan& final_level = levels.back();
+            surface = refine_preserving_normals(surface, final_level.mesh_x, final_level.mesh_y);
+            Receiver receiver = scene.receiver;
+            receiver.width = final_level.resolution_x;
+            receiver.height = final_level.resolution_y;
+            Scene final_scene = scene;
+            final_scene.receiver = receiver;
+            const RaySet rays = generate_rays(scene.light, surface, receiver, options.seed);
+            const ProposalSettings ps = design_detail::proposals_for(options, 5, kept_arms);
+            Problem final_state(surface, rays, make_path_params(final_scene),
+                                         make_target(target_image, receiver.width, receiver.height, rays.total),
+                                         ObjectiveWeights{options.sobel_weight, options.energy_threshold,
+                                                          options.lost_light_weight},
+                                         penalties, ps, make_bandit("uniform", std::max<int>(1, int(ps.bank.size()))),
+                                         1.0, 1.0);
+            result.irradiance = final_state.histogram();
+            result.target = final_state.image().target();
+            result.value = final_state.value();
+            result.rays = rays.size();
         }
     }
     result.surface = std::move(surface);
     result.iterations = total_iterations;
     result.seconds = elapsed();
     return result;
+}
+
+}  // namespace design_detail
+
+// Designs the surface of `scene` so that its irradiance matches `target_image`
+// (relative irradiance, any resolution). `callback(const DesignProgress&)` is called
+// every options.progress_every iterations and may return true to stop (the best state
+// so far is kept). options.evaluation picks incremental (default) or full retraces.
+template <class Callback>
+DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
+                    Callback&& callback) {
+    if (options.evaluation == "full")
+        return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
+                                                              std::forward<Callback>(callback));
+    return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
+                                                          std::forward<Callback>(callback));
 }
 
 }  // namespace freeform

@@ -48,6 +48,18 @@ struct HeightfieldBackend {
     void committed(const Patch&) {}
 };
 
+// The reference's evaluation: every move retraces every ray (same results as the
+// incremental backend, at the cost of a full trace; for comparisons and benchmarks).
+struct FullRetraceBackend {
+    static constexpr bool concurrent_deltas = true;
+    static constexpr const char* name = "full";
+    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
+    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change) const {
+        trace.evaluate_all(o, change);
+    }
+    void committed(const Patch&) {}
+};
+
 template <class Backend = HeightfieldBackend>
 class BasicReflectorProblem {
 public:

@@ -99,7 +99,9 @@ inline ImageF read_image_grey(const std::filesystem::path& file) {
         pixels.reset(stbi_load_from_memory(data, size, &width, &height, &channels, 0));
     if (!pixels) {
         const char* reason = stbi_failure_reason();
-        throw IoError("cannot read image '" + file.string() + "': " + (reason ? reason : "unknown error"));
+        // stb leaves the reason empty for some truncated files.
+        const std::string why = reason && *reason ? reason : "corrupt or truncated image data";
+        throw IoError("cannot read image '" + file.string() + "': " + why);
     }
 
     auto sample = [&](std::size_t i) -> float {

@@ -22,7 +22,11 @@ inline ImageD load_target_image(const Scene& scene) {
         const int w = std::min(4 * scene.receiver.width, 4096), h = std::min(4 * scene.receiver.height, 4096);
         img = render_text(t.text, find_font(t.font), w, h, t.margin);
     } else {
-        img = read_image_grey(t.image);
+        try {
+            img = read_image_grey(t.image);
+        } catch (const IoError& e) {
+            throw IoError(std::string("target.image: ") + e.what());
+        }
     }
     ImageD out = img.cast<double>();
     if (!out.isFinite().all()) throw InputError("target.image: " + t.image.string() + " has non-finite values");

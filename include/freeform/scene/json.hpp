@@ -680,6 +680,20 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"smoothness_weight",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.smoothness_weight = number_in(v, p, 0, 1e6); },
          [](const OptimiseSpec& o, json& j) { j["smoothness_weight"] = o.smoothness_weight; }},
+        {"evaluation",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.evaluation = string_value(v, p);
+             if (o.evaluation != "incremental" && o.evaluation != "full")
+                 throw error(p, "must be one of \"incremental\", \"full\", got " + describe(v));
+         },
+         [](const OptimiseSpec& o, json& j) { j["evaluation"] = o.evaluation; }},
+        {"kernel_shapes",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.kernel_shapes = string_value(v, p);
+             if (o.kernel_shapes != "bank" && o.kernel_shapes != "isotropic")
+                 throw error(p, "must be one of \"bank\", \"isotropic\", got " + describe(v));
+         },
+         [](const OptimiseSpec& o, json& j) { j["kernel_shapes"] = o.kernel_shapes; }},
         {"bandit",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
              o.bandit = string_value(v, p);

@@ -84,6 +84,8 @@ struct OptimiseSpec {
     double smoothness_weight = 0;
 
     // Proposals.
+    std::string evaluation = "incremental";  // or "full": every move retraces every ray (comparisons)
+    std::string kernel_shapes = "bank";      // or "isotropic": one round kernel, no bandit choice
     std::string bandit = "history";
     int bandit_sync = 64;
     std::int64_t preprocess_iterations = 1000;  // history bandit: trial run with all shapes (0: none)

@@ -52,16 +52,6 @@ FREEFORM_HD inline void triangle_vertices(int nx, std::int32_t tri, int (&i)[3],
     }
 }
 
-template <class View>
-FREEFORM_HD inline void fill_hit_vertices(const View& hf, SurfaceHit& hit) {
-    int i[3], j[3];
-    triangle_vertices(hf.nx, hit.tri, i, j);
-    for (int k = 0; k < 3; ++k) {
-        hit.p[k] = hf.vertex(i[k], j[k]);
-        hit.n[k] = hf.normal(i[k], j[k]);
-    }
-}
-
 namespace hf_detail {
 
 // What the walk needs of a view that does not change along a ray's path: computed once
@@ -338,6 +328,21 @@ FREEFORM_HD inline bool nearest_hit(const View& hf, const Grid& g, Vec3 o, Vec3 
 }
 
 }  // namespace hf_detail
+
+// Fills the vertex positions and normals of triangle hit.tri (a tracer that found the
+// triangle by other means, like Embree, calls this), exactly as the walk does.
+template <class View>
+FREEFORM_HD inline void fill_hit_vertices(const View& hf, SurfaceHit& hit) {
+    const std::int32_t c = hit.tri >> 1;
+    const int ci = int(c % (hf.nx - 1)), cj = int(c / (hf.nx - 1)), k = int(hit.tri & 1);
+    const float x0 = hf.u0 + float(ci) * hf.du, x1 = hf.u0 + float(ci + 1) * hf.du;
+    const float y0 = hf.v0 + float(cj) * hf.dv, y1 = hf.v0 + float(cj + 1) * hf.dv;
+    const hf_detail::Corners h = hf_detail::corners(hf, ci, cj);
+    hit.p[0] = Vec3{x0, y0, h.h00};
+    hit.p[1] = Vec3{x1, k == 0 ? y0 : y1, k == 0 ? h.h10 : h.h11};
+    hit.p[2] = Vec3{k == 0 ? x1 : x0, y1, k == 0 ? h.h11 : h.h01};
+    hf_detail::triangle_normals(hf, ci, cj, k, hit.n);
+}
 
 // Finds the nearest hit of the ray (o, d) with the height field, ignoring triangle
 // `exclude` and triangles seen from the wrong side (front: from +w). `visit(ci, cj)` is

@@ -252,6 +252,37 @@ public:
             return;
         }
         collect_rays(affected_cells(o), change);
+        retrace_into(change, retrace);
+    }
+
+    // Retraces every ray against the surface with `o` applied: the reference's full
+    // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
+    void evaluate_all(const HeightOverlay& o, TraceChange& change) const {
+        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+        change.rays.resize(std::size_t(rays_->size()));
+        for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
+        const OverlayView view = overlay_view(*surface_, o);
+        retrace_into(change, [&](std::int32_t id, CellCollector& visit) {
+            return trace_heightfield_ray(view, params_, rays_->origin[std::size_t(id)],
+                                         rays_->direction[std::size_t(id)], visit);
+        });
+    }
+
+    // Makes an evaluated change part of the state (the caller commits the heights).
+    void commit(const TraceChange& change) {
+        for (std::size_t k = 0; k < change.rays.size(); ++k) {
+            const std::int32_t id = change.rays[k];
+            records_[std::size_t(id)] = change.records[k];
+            index_.replace(id, std::span(change.cells.data() + change.cell_begin[k],
+                                         std::size_t(change.cell_begin[k + 1] - change.cell_begin[k])));
+        }
+        for (std::size_t s = 0; s < status_weight_.size(); ++s) status_weight_[s] += change.status_delta[s];
+    }
+
+private:
+    // Retraces change.rays and records what changed.
+    template <class Retrace>
+    void retrace_into(TraceChange& change, Retrace&& retrace) const {
         const int cells_per_row = surface_->nx() - 1;
         change.records.resize(change.rays.size());
         change.cell_begin.resize(change.rays.size() + 1);
@@ -272,18 +303,6 @@ public:
         change.cell_begin[change.rays.size()] = std::int32_t(change.cells.size());
     }
 
-    // Makes an evaluated change part of the state (the caller commits the heights).
-    void commit(const TraceChange& change) {
-        for (std::size_t k = 0; k < change.rays.size(); ++k) {
-            const std::int32_t id = change.rays[k];
-            records_[std::size_t(id)] = change.records[k];
-            index_.replace(id, std::span(change.cells.data() + change.cell_begin[k],
-                                         std::size_t(change.cell_begin[k + 1] - change.cell_begin[k])));
-        }
-        for (std::size_t s = 0; s < status_weight_.size(); ++s) status_weight_[s] += change.status_delta[s];
-    }
-
-private:
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
 
     void collect_rays(const Patch& cells, TraceChange& change) const {

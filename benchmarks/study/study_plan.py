@@ -1,0 +1,204 @@
+"""What the study runs: cases, methods and the experiment plans (quick and full).
+
+A run is (case, method, seed, time budget). Cases are public scenes, some with a JSON merge
+patch that turns them into a stress case; methods are an engine of study_run with a patch
+of the scene's "optimise"/"surface"/"light" keys and a few driver options. Everything the
+report says about a method's settings comes from here and from the result files.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    scene: str                      # relative to the repository root
+    budget: float                   # seconds per run, full mode
+    quick_budget: float = 0.0       # seconds per run, quick mode (0: not in quick mode)
+    case_patch: dict = field(default_factory=dict)
+    stress: str = ""                # why this is a stress case ("" for the public cases)
+    title: str = ""
+    reference: dict = field(default_factory=dict)  # the reference's figures for this case
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    engine: str
+    title: str
+    patch: dict = field(default_factory=dict)
+    options: tuple = ()             # extra study_run arguments
+    family: str = "ours"            # ours | ablation | baseline | stress
+    judged_with_check: bool = False  # also judged on 4x rays (--check-render)
+
+
+# --- cases -------------------------------------------------------------------------------
+
+# Grazing light on the E case: collimated light at 70 degrees from the mirror's normal,
+# the receiver moved onto the specular direction (0.5 m away, facing the mirror). Rays
+# cross ~27 surface cells inside the height slab, and the reflected beam is 3x narrower.
+_SIN70, _COS70 = 0.9396926, 0.3420201
+GRAZING_PATCH = {
+    "light": {"type": "collimated", "direction": [0, -_SIN70, -_COS70], "rays_per_cell": 16},
+    "receiver": {"center": [0, -0.5 * _SIN70, 0.5 * _COS70], "normal": [0, _SIN70, -_COS70], "up": [0, 0, 1]},
+}
+
+# A point light close to the mirror: a flat mirror spreads its light over ~4x the
+# receiver, so the start has about a quarter of the energy on the receiver.
+POINT_LOW_PATCH = {"light": {"type": "point", "position": [0, 0, 0.12], "rays_per_cell": 16}}
+
+CASES = {c.name: c for c in [
+    Case("E", "examples/scenes/letter-e.json", 12, 6, title="letter E (collimated, mirror, 101² mesh, 200² px)",
+         reference={"error": 0.083, "energy": 0.976, "iterations": 5.3e5, "seconds": 337}),
+    Case("V", "examples/scenes/letter-v.json", 12, title="letter V (collimated, mirror, 101², 200²)",
+         reference={"error": 0.087, "energy": 0.988, "iterations": 3.7e5, "seconds": 239}),
+    Case("at", "examples/scenes/letter-at.json", 12, title="symbol @ (collimated, mirror, 101², 200²)",
+         reference={"error": 0.086, "energy": 0.965, "iterations": 9.2e5, "seconds": 548}),
+    Case("headlight", "examples/scenes/headlight.json", 5, 3,
+         title="headlight low beam (collimated, mirror, 13² mesh, 50² px)",
+         reference={"error": 0.096, "energy": 1.0, "iterations": 1.3e5, "seconds": 75,
+                    "runs": [0.096, 0.092, 0.103, 0.089]}),
+    Case("point", "examples/scenes/point-light.json", 12,
+         title="letter F, point light 0.3 m from an elliptical 12 x 8 cm mirror (121 x 81 mesh, 240 x 160 px)",
+         reference={"energy_threshold": 0.95}),
+    Case("lens", "examples/scenes/lens.json", 12, title="letter L through a PMMA lens (IOR 1.49, 101², 200²)"),
+    Case("camera", "examples/scenes/camera.json", 40,
+         title="grey photograph 'camera' (collimated, mirror, 401² mesh, 200² px)",
+         stress="photographic target: every pixel matters, 401² mesh",
+         reference={"error": 0.104, "energy": 0.948, "iterations": 5.6e6, "seconds": 4980,
+                    "note": "the reference's photo case is Lenna, not this image"}),
+    Case("point-low", "examples/scenes/point-light.json", 12, case_patch=POINT_LOW_PATCH,
+         title="point light 0.12 m from the mirror: low initial energy",
+         stress="point light with low initial energy (~0.25 of the light on the receiver at the start)"),
+    Case("grazing", "examples/scenes/letter-e.json", 12, case_patch=GRAZING_PATCH,
+         title="letter E under grazing light (70° from the normal)",
+         stress="grazing light: long paths through the height slab, foreshortened beam"),
+]}
+
+PUBLIC_CASES = ["E", "V", "at", "headlight", "point", "lens", "camera"]
+SIMPLE_CASES = ["E", "V", "at", "headlight", "point", "lens"]  # failure rate 0 expected
+
+# --- methods -----------------------------------------------------------------------------
+
+_NO_PENALTIES = {"energy_threshold": 0, "sobel_weight": 0, "lost_light_weight": 0}
+
+METHODS = {m.name: m for m in [
+    Method("ours", "design", "ours: multi-level, 7 kernel shapes + history bandit, Phong, energy/Sobel/lost-light "
+           "terms, incremental evaluation", judged_with_check=True),
+    # The ablation ladder, from the reference's chapter-3 baseline up to ours.
+    Method("sa-plain", "design", "plain SA (reference ch. 3): single-vertex moves, flat triangles, no penalties, "
+           "one level", patch={"optimise": {"single_vertex": True, "multilevel": False, **_NO_PENALTIES},
+                                "surface": {"phong_alpha": 0}}, family="ablation"),
+    Method("sa+kernels", "design", "+ Gaussian kernels (7 shapes, picked uniformly at random)",
+           patch={"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES},
+                  "surface": {"phong_alpha": 0}}, family="ablation"),
+    Method("sa+kernels+phong", "design", "+ Phong correction (α = 0.75)",
+           patch={"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES}}, family="ablation"),
+    Method("sa+kernels+phong+terms", "design", "+ energy threshold 0.95, Sobel term 0.1, lost-light term 1",
+           patch={"optimise": {"multilevel": False, "bandit": "uniform"}}, family="ablation"),
+    Method("ours-uniform", "design", "+ multi-level (kernel shape still uniform at random)",
+           patch={"optimise": {"bandit": "uniform"}}),
+    Method("ours-ucb1", "design", "ours with the UCB1 bandit", patch={"optimise": {"bandit": "ucb1"}}),
+    Method("ours-ducb", "design", "ours with the discounted-UCB bandit",
+           patch={"optimise": {"bandit": "discounted-ucb"}}),
+    Method("ours-one-kernel", "design-one-kernel", "ours with one kernel shape (isotropic σ = support/4)"),
+    Method("ours-full-eval", "design-full", "ours judging every proposal by a full retrace (no incremental evaluation)"),
+    Method("ours-single-level", "design", "ours without the multi-level schedule",
+           patch={"optimise": {"multilevel": False}}),
+    Method("ours-flat", "design", "ours with flat triangles (Phong α = 0)", patch={"surface": {"phong_alpha": 0}}),
+    # Stress variants of ours.
+    Method("ours-tiny-kernels", "design", "ours with 3 x 3 kernels only, on every level",
+           options=("--kernel-supports", "3"), family="stress"),
+    Method("ours-no-energy", "design", "ours without energy terms (no eq. 4.4 threshold, no lost-light term)",
+           patch={"optimise": {"energy_threshold": 0, "lost_light_weight": 0}}, family="stress"),
+    # "No more than a scene needs": larger models than the scene chose.
+    Method("ours-mesh2x", "design", "ours on a final mesh with twice the vertices per side",
+           options=("--mesh-scale", "2"), family="model", judged_with_check=True),
+    Method("ours-rays4x", "design", "ours with 4x the rays on the final level",
+           options=("--rays-scale", "4"), family="model", judged_with_check=True),
+    # Baselines on the same tracer and objective (control grid, see control_grid.hpp).
+    Method("spsa", "spsa", "SPSA (Spall gains a_k = a/(k+1+A)^0.602, c_k = c/(k+1)^0.101), 13² control grid",
+           family="baseline"),
+    Method("spsa-fullmesh", "spsa", "SPSA on every vertex of the final mesh", options=("--control", "0"),
+           family="baseline"),
+    Method("spsa-few-rays", "spsa", "SPSA with 1 ray per receiver cell while optimising",
+           patch={"light": {"rays_per_cell": 1}}, family="stress"),
+    Method("pagmo-sa", "pagmo-sa", "pagmo2 simulated annealing (Corana), 13² control grid", family="baseline"),
+    Method("pagmo-cmaes", "pagmo-cmaes", "pagmo2 CMA-ES, 13² control grid", family="baseline"),
+    Method("pagmo-xnes", "pagmo-xnes", "pagmo2 xNES, 13² control grid", family="baseline"),
+    Method("pagmo-sade", "pagmo-sade", "pagmo2 self-adaptive DE, 13² control grid", family="baseline"),
+    Method("nlopt-bobyqa", "nlopt-bobyqa", "NLopt BOBYQA, 13² control grid", family="baseline"),
+    Method("nlopt-crs2", "nlopt-crs2", "NLopt CRS2-LM, 13² control grid", family="baseline"),
+]}
+
+ABLATION_LADDER = ["sa-plain", "sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform", "ours"]
+OURS_FAMILY = ["ours", "ours-uniform", "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-single-level"]
+MAIN_BASELINES = ["sa-plain", "spsa", "pagmo-sa", "pagmo-cmaes", "nlopt-bobyqa"]
+
+
+@dataclass(frozen=True)
+class Run:
+    case: str
+    method: str
+    seed: int
+    budget: float
+    purpose: str          # main | ablation | extra | stress | ladder | model | quick
+    save_images: bool = False
+
+    @property
+    def key(self) -> str:
+        return f"{self.case}/{self.method}/b{self.budget:g}-s{self.seed}"
+
+
+def _grid(cases, methods, seeds, purpose, budget_scale=1.0, quick=False, save_first=False):
+    runs = []
+    for c in cases:
+        case = CASES[c]
+        b = (case.quick_budget if quick else case.budget) * budget_scale
+        for m in methods:
+            for i, s in enumerate(seeds):
+                runs.append(Run(c, m, s, round(b, 3), purpose, save_images=save_first and i == 0))
+    return runs
+
+
+SEEDS = list(range(101, 111))   # never the cases' own seed (1), which judges every run
+
+
+def full_plan() -> list[Run]:
+    runs = []
+    runs += _grid(PUBLIC_CASES, ["ours"] + MAIN_BASELINES, SEEDS, "main", save_first=True)
+    runs += _grid(["E", "headlight"], ["sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform",
+                                       "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-full-eval",
+                                       "ours-single-level", "ours-flat"], SEEDS, "ablation")
+    runs += _grid(["headlight"], ["pagmo-xnes", "pagmo-sade", "nlopt-crs2"], SEEDS, "extra")
+    runs += _grid(["E"], ["spsa-fullmesh"], SEEDS, "extra")
+    runs += _grid(["point-low"], ["ours", "ours-no-energy", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS,
+                  "stress")
+    runs += _grid(["grazing"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS, "stress")
+    runs += _grid(["E", "headlight", "point"], ["ours-tiny-kernels"], SEEDS, "stress")
+    runs += _grid(["E", "point"], ["ours-no-energy"], SEEDS, "stress")
+    runs += _grid(["E", "headlight"], ["spsa-few-rays"], SEEDS, "stress")
+    # Our error against time budget: final errors at B/4, B/2 (B: 10 seeds above) and 4 B.
+    for scale in (0.25, 0.5, 4.0):
+        runs += _grid(PUBLIC_CASES, ["ours"], SEEDS[:3], "ladder", budget_scale=scale)
+    runs += _grid([c for c in PUBLIC_CASES if c != "camera"], ["ours-mesh2x"], SEEDS[:5], "model")
+    runs += _grid(PUBLIC_CASES, ["ours-rays4x"], SEEDS[:5], "model")
+    return _unique(runs)
+
+
+def quick_plan() -> list[Run]:
+    seeds = SEEDS[:3]
+    runs = _grid(["E", "headlight"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], seeds, "quick",
+                 quick=True, save_first=True)
+    runs += _grid(["headlight"], ["ours-full-eval", "pagmo-sa"], seeds, "quick", quick=True)
+    return _unique(runs)
+
+
+def _unique(runs):
+    seen, out = set(), []
+    for r in runs:
+        if r.key not in seen:
+            seen.add(r.key)
+            out.append(r)
+    return out

@@ -1,0 +1,345 @@
+# Runs the `freeform` command line and checks what it promises (docs/scene.md, the
+# program's --help): bad input exits with 2 after one line on stderr that names the bad
+# key or file, and writes nothing; good input writes the documented files and metrics.
+#
+#   cmake -DFREEFORM=<exe> -DDATA=<tests/data/cli> -DSOURCE_DIR=<repo> -DWORK=<dir>
+#         -DGROUP=errors|render|design -P cli_checks.cmake
+#
+# Every failed check is reported; the script fails at the end if any did.
+cmake_minimum_required(VERSION 3.25)
+
+foreach(var FREEFORM DATA SOURCE_DIR WORK GROUP)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "cli_checks.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+
+set(failures 0)
+macro(fail what)
+  message(SEND_ERROR "FAILED: ${what}")
+  math(EXPR failures "${failures} + 1")
+endmacro()
+
+file(REMOVE_RECURSE "${WORK}")
+file(MAKE_DIRECTORY "${WORK}")
+
+# run(<name> <args>...): runs freeform in ${WORK}; sets rc, out, err.
+function(run name)
+  execute_process(
+    COMMAND "${FREEFORM}" ${ARGN}
+    WORKING_DIRECTORY "${WORK}"
+    RESULT_VARIABLE r
+    OUTPUT_VARIABLE o
+    ERROR_VARIABLE e
+    TIMEOUT 300)
+  set(rc "${r}" PARENT_SCOPE)
+  set(out "${o}" PARENT_SCOPE)
+  set(err "${e}" PARENT_SCOPE)
+endfunction()
+
+# expect_input_error(<name> <expected text in the message> <args>...):
+# exit code 2, exactly one line on stderr containing the text, nothing on stdout, and
+# no output directory (the args write to out-<name> when they get that far).
+function(expect_input_error name expected)
+  set(outdir "${WORK}/out-${name}")
+  run(${name} ${ARGN})
+  if(NOT rc STREQUAL "2")
+    fail("${name}: exit code ${rc}, expected 2 (stderr: ${err})")
+  endif()
+  string(REGEX MATCHALL "\n" newlines "${err}")
+  list(LENGTH newlines lines)
+  if(NOT lines EQUAL 1 OR NOT err MATCHES "\n$")
+    fail("${name}: expected exactly one line on stderr, got ${lines} newline(s) in '${err}'")
+  endif()
+  string(FIND "${err}" "${expected}" at)
+  if(at EQUAL -1)
+    fail("${name}: the message does not name '${expected}': ${err}")
+  endif()
+  if(NOT out STREQUAL "")
+    fail("${name}: unexpected output on stdout: ${out}")
+  endif()
+  if(EXISTS "${outdir}")
+    file(GLOB_RECURSE left RELATIVE "${outdir}" "${outdir}/*")
+    fail("${name}: the output directory was created (holding: ${left})")
+  endif()
+  message(STATUS "ok   ${name}: ${err}")
+  set(failures ${failures} PARENT_SCOPE)
+endfunction()
+
+# json_get(<var> <file> <key>): a top-level value of a JSON file; fails when missing.
+function(json_get var file key)
+  file(READ "${file}" text)
+  string(JSON value ERROR_VARIABLE error GET "${text}" "${key}")
+  if(error)
+    fail("${file}: no key '${key}' (${error})")
+    set(failures ${failures} PARENT_SCOPE)
+  endif()
+  set(${var} "${value}" PARENT_SCOPE)
+endfunction()
+
+function(expect_files dir)
+  foreach(f IN LISTS ARGN)
+    if(NOT EXISTS "${dir}/${f}")
+      fail("${dir}: ${f} was not written")
+    else()
+      file(SIZE "${dir}/${f}" size)
+      if(size EQUAL 0)
+        fail("${dir}/${f} is empty")
+      endif()
+    endif()
+  endforeach()
+  set(failures ${failures} PARENT_SCOPE)
+endfunction()
+
+function(expect_keys file)
+  file(READ "${file}" text)
+  foreach(key IN LISTS ARGN)
+    string(JSON value ERROR_VARIABLE error GET "${text}" "${key}")
+    if(error)
+      fail("${file}: no key '${key}'")
+    endif()
+  endforeach()
+  set(failures ${failures} PARENT_SCOPE)
+endfunction()
+
+set(valid "${DATA}/valid.json")
+
+# ------------------------------------------------------------------------- errors
+if(GROUP STREQUAL "errors")
+  expect_input_error(missing-scene "does-not-exist.json"
+    render "${DATA}/does-not-exist.json" --out out-missing-scene)
+  expect_input_error(missing-scene-design "does-not-exist.json"
+    design "${DATA}/does-not-exist.json" --out out-missing-scene-design)
+  expect_input_error(syntax-error "syntax-error.json: invalid JSON at line"
+    render "${DATA}/syntax-error.json" --out out-syntax-error)
+  expect_input_error(unknown-key "receiver.resolutin"
+    render "${DATA}/unknown-key.json" --out out-unknown-key)
+  expect_input_error(wrong-type "light.rays_per_cell"
+    render "${DATA}/wrong-type.json" --out out-wrong-type)
+  # nlohmann::json rejects 1e999 while parsing, before any key is known: the file is named.
+  expect_input_error(non-finite "non-finite.json"
+    render "${DATA}/non-finite.json" --out out-non-finite)
+  expect_input_error(zero-size "surface.size[0]"
+    render "${DATA}/zero-size.json" --out out-zero-size)
+  expect_input_error(negative-size "receiver.size[1]"
+    render "${DATA}/negative-size.json" --out out-negative-size)
+  expect_input_error(inverted-bounds "surface.height_bounds"
+    render "${DATA}/inverted-bounds.json" --out out-inverted-bounds)
+  expect_input_error(degenerate-frame "surface.up"
+    render "${DATA}/degenerate-frame.json" --out out-degenerate-frame)
+  expect_input_error(target-missing "no-such-target.png"
+    render "${DATA}/target-missing.json" --out out-target-missing)
+  expect_input_error(target-corrupt "corrupt.png"
+    render "${DATA}/target-corrupt.json" --out out-target-corrupt)
+  expect_input_error(target-truncated "truncated.png"
+    render "${DATA}/target-truncated.json" --out out-target-truncated)
+  expect_input_error(target-corrupt-design "corrupt.png"
+    design "${DATA}/target-corrupt.json" --out out-target-corrupt-design)
+  expect_input_error(initial-corrupt "corrupt.pfm"
+    render "${DATA}/initial-corrupt.json" --out out-initial-corrupt)
+  expect_input_error(heightmap-corrupt "corrupt.pfm"
+    render "${valid}" --heightmap "${DATA}/corrupt.pfm" --out out-heightmap-corrupt)
+  expect_input_error(heightmap-nan "nan.pfm"
+    render "${valid}" --heightmap "${DATA}/nan.pfm" --out out-heightmap-nan)
+  expect_input_error(heightmap-missing "no-such-heightmap.pfm"
+    render "${valid}" --heightmap "${DATA}/no-such-heightmap.pfm" --out out-heightmap-missing)
+  expect_input_error(mesh-corrupt "corrupt.obj"
+    render "${valid}" --mesh "${DATA}/corrupt.obj" --out out-mesh-corrupt)
+  expect_input_error(mesh-missing "no-such-mesh.obj"
+    render "${valid}" --mesh "${DATA}/no-such-mesh.obj" --out out-mesh-missing)
+  expect_input_error(scene-mesh-corrupt "corrupt.obj"
+    render "${DATA}/with-corrupt-mesh.json" --out out-scene-mesh-corrupt)
+  expect_input_error(heightmap-and-mesh "--heightmap"
+    render "${valid}" --heightmap "${DATA}/nan.pfm" --mesh "${DATA}/triangle.obj" --out out-heightmap-and-mesh)
+  expect_input_error(bad-tracer "--tracer"
+    render "${valid}" --tracer raymarcher --out out-bad-tracer)
+  expect_input_error(heightfield-tracer-with-meshes "--tracer heightfield"
+    render "${DATA}/with-mesh.json" --tracer heightfield --out out-heightfield-tracer-with-meshes)
+  expect_input_error(heightfield-tracer-with-mesh-option "--tracer heightfield"
+    render "${valid}" --mesh "${DATA}/triangle.obj" --tracer heightfield --out out-heightfield-tracer-with-mesh-option)
+  expect_input_error(heightfield-trace-key-with-meshes "trace.tracer"
+    render "${DATA}/heightfield-with-mesh.json" --out out-heightfield-trace-key-with-meshes)
+  expect_input_error(design-without-target "target"
+    design "${valid}" --out out-design-without-target)
+  expect_input_error(design-zero-time-budget "--time-budget"
+    design "${DATA}/design-tiny.json" --time-budget 0 --out out-design-zero-time-budget)
+
+  # An existing output directory is left as it was.
+  file(MAKE_DIRECTORY "${WORK}/existing")
+  file(WRITE "${WORK}/existing/keep.txt" "keep")
+  run(existing-dir render "${DATA}/zero-size.json" --out existing)
+  file(GLOB_RECURSE left RELATIVE "${WORK}/existing" "${WORK}/existing/*")
+  if(NOT rc STREQUAL "2" OR NOT left STREQUAL "keep.txt")
+    fail("existing-dir: exit code ${rc}, directory now holds: ${left}")
+  endif()
+
+# ------------------------------------------------------------------------- render
+elseif(GROUP STREQUAL "render")
+  run(render-demo render "${SOURCE_DIR}/examples/scenes/demo-paraboloid.json" --out demo)
+  if(NOT rc STREQUAL "0")
+    fail("render demo-paraboloid: exit code ${rc}: ${err}")
+  endif()
+  if(NOT err STREQUAL "")
+    fail("render demo-paraboloid wrote on stderr: ${err}")
+  endif()
+  expect_files("${WORK}/demo" irradiance.pfm irradiance.png metrics.json)
+  if(EXISTS "${WORK}/demo/metrics.json")
+    set(m "${WORK}/demo/metrics.json")
+    expect_keys("${m}" energy rays rays_hit_receiver seconds tracer rays_per_second)
+    json_get(energy "${m}" energy)
+    json_get(rays "${m}" rays)
+    json_get(hit "${m}" rays_hit_receiver)
+    json_get(tracer "${m}" tracer)
+    # The paraboloid focuses every ray onto the receiver: energy 1 to rounding.
+    if(NOT (energy GREATER 0.999999 AND energy LESS 1.000001))
+      fail("demo-paraboloid: energy ${energy}, expected 1")
+    endif()
+    # 16 rays per cell on a 200 x 200 receiver.
+    if(NOT rays EQUAL 640000 OR NOT hit EQUAL 640000)
+      fail("demo-paraboloid: rays ${rays}, rays_hit_receiver ${hit}, expected 640000 each")
+    endif()
+    if(NOT tracer STREQUAL "heightfield")
+      fail("demo-paraboloid: tracer ${tracer}, expected heightfield")
+    endif()
+    file(READ "${m}" text)
+    string(JSON has_error ERROR_VARIABLE no_error GET "${text}" error)
+    if(NOT no_error)
+      fail("demo-paraboloid has no target but metrics.json has an error")
+    endif()
+  endif()
+  if(EXISTS "${WORK}/demo/irradiance.pfm")
+    file(READ "${WORK}/demo/irradiance.pfm" header LIMIT 16)
+    if(NOT header MATCHES "^P[fF]\n200 200\n")
+      fail("irradiance.pfm: unexpected header '${header}'")
+    endif()
+  endif()
+
+  # A scene with a target also reports the error and writes the comparison.
+  run(render-target render "${DATA}/with-target.json" --out target --threads 1)
+  if(NOT rc STREQUAL "0")
+    fail("render with a target: exit code ${rc}: ${err}")
+  endif()
+  expect_files("${WORK}/target" irradiance.pfm irradiance.png metrics.json comparison.png)
+  if(EXISTS "${WORK}/target/metrics.json")
+    json_get(error "${WORK}/target/metrics.json" error)
+    if(NOT (error GREATER 0 AND error LESS_EQUAL 1))
+      fail("render with a target: error ${error}, expected in (0, 1]")
+    endif()
+  endif()
+
+  # Renders of a given heightmap and of an imported mesh.
+  run(render-heightmap render "${valid}" --heightmap "${WORK}/demo/irradiance.pfm" --out from-heightmap)
+  if(NOT rc STREQUAL "0")
+    fail("render --heightmap: exit code ${rc}: ${err}")
+  endif()
+  expect_files("${WORK}/from-heightmap" irradiance.pfm metrics.json)
+
+  # The same render twice, with one and with two threads: identical irradiance.
+  run(render-1 render "${DATA}/with-target.json" --out threads1 --threads 1)
+  run(render-2 render "${DATA}/with-target.json" --out threads2 --threads 2)
+  execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files "${WORK}/threads1/irradiance.pfm"
+                          "${WORK}/threads2/irradiance.pfm" RESULT_VARIABLE different)
+  if(different)
+    fail("render: irradiance.pfm differs between --threads 1 and --threads 2")
+  endif()
+
+# ------------------------------------------------------------------------- design
+elseif(GROUP STREQUAL "design")
+  run(design-1 design "${DATA}/design-tiny.json" --out design1 --threads 1 --quiet)
+  if(NOT rc STREQUAL "0")
+    fail("design: exit code ${rc}: ${err}")
+  endif()
+  if(NOT err STREQUAL "")
+    fail("design --quiet wrote on stderr: ${err}")
+  endif()
+  set(files metrics.json convergence.csv heightmap.pfm surface.obj surface.stl irradiance.png target.png comparison.png)
+  expect_files("${WORK}/design1" ${files})
+  set(m "${WORK}/design1/metrics.json")
+  if(EXISTS "${m}")
+    expect_keys("${m}" error energy iterations seconds iterations_per_second levels seed tracer bandit_weights
+                interrupted)
+    json_get(iterations "${m}" iterations)
+    json_get(seed "${m}" seed)
+    json_get(error "${m}" error)
+    json_get(energy "${m}" energy)
+    json_get(interrupted "${m}" interrupted)
+    json_get(tracer "${m}" tracer)
+    if(NOT iterations EQUAL 2000)
+      fail("design: ${iterations} iterations, expected the scene's max_iterations 2000")
+    endif()
+    if(NOT seed EQUAL 5)
+      fail("design: seed ${seed}, expected 5")
+    endif()
+    if(NOT (error GREATER 0 AND error LESS 0.6))
+      fail("design: error ${error}, expected in (0, 0.6)")
+    endif()
+    if(NOT (energy GREATER 0.5 AND energy LESS_EQUAL 1.000001))
+      fail("design: energy ${energy}")
+    endif()
+    if(interrupted)
+      fail("design: reported as interrupted")
+    endif()
+    if(NOT tracer STREQUAL "heightfield")
+      fail("design: tracer ${tracer}")
+    endif()
+    file(READ "${m}" text)
+    string(JSON n_weights ERROR_VARIABLE e LENGTH "${text}" bandit_weights)
+    if(e OR n_weights LESS 1)
+      fail("design: bandit_weights is empty")
+    endif()
+    string(JSON n_levels ERROR_VARIABLE e LENGTH "${text}" levels)
+    if(e OR n_levels LESS 1)
+      fail("design: levels is empty")
+    endif()
+  endif()
+  if(EXISTS "${WORK}/design1/convergence.csv")
+    file(STRINGS "${WORK}/design1/convergence.csv" rows)
+    list(GET rows 0 header)
+    if(NOT header STREQUAL "seconds,iteration,level,stage,error,energy,objective,temperature")
+      fail("convergence.csv: header '${header}'")
+    endif()
+    list(LENGTH rows n_rows)
+    if(n_rows LESS 3)
+      fail("convergence.csv: only ${n_rows} rows")
+    endif()
+  endif()
+  if(EXISTS "${WORK}/design1/heightmap.pfm")
+    file(READ "${WORK}/design1/heightmap.pfm" header LIMIT 16)
+    if(NOT header MATCHES "^Pf\n21 21\n")
+      fail("heightmap.pfm: unexpected header '${header}' (expected a 21 x 21 grey PFM)")
+    endif()
+  endif()
+
+  # The seed makes the run: two threads give the same surface and irradiance.
+  run(design-2 design "${DATA}/design-tiny.json" --out design2 --threads 2 --quiet)
+  if(NOT rc STREQUAL "0")
+    fail("design --threads 2: exit code ${rc}: ${err}")
+  endif()
+  foreach(f heightmap.pfm irradiance.pfm surface.stl)
+    execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files "${WORK}/design1/${f}" "${WORK}/design2/${f}"
+                    RESULT_VARIABLE different)
+    if(different)
+      fail("design: ${f} differs between --threads 1 and --threads 2")
+    endif()
+  endforeach()
+
+  # The designed heightmap renders again through --heightmap to the error it reported.
+  run(render-design render "${DATA}/design-tiny.json" --heightmap "${WORK}/design1/heightmap.pfm" --out rerender)
+  if(NOT rc STREQUAL "0")
+    fail("render --heightmap of the design: exit code ${rc}: ${err}")
+  elseif(EXISTS "${m}")
+    json_get(error_again "${WORK}/rerender/metrics.json" error)
+    json_get(error "${m}" error)
+    if(NOT error_again STREQUAL error)
+      fail("render of the designed heightmap: error ${error_again}, design reported ${error}")
+    endif()
+  endif()
+
+else()
+  message(FATAL_ERROR "cli_checks.cmake: unknown GROUP '${GROUP}'")
+endif()
+
+if(failures GREATER 0)
+  message(FATAL_ERROR "${failures} check(s) failed")
+endif()
+message(STATUS "all ${GROUP} checks passed")

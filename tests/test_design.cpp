@@ -1,0 +1,510 @@
+// The designer: refinement between levels, the multi-level plan, reproducibility for
+// any seed / thread count / speculation width, stopping from a callback, and end-to-end
+// designs that must reach a given error on a deterministic iteration budget.
+//
+// Kernel moves staying inside the height bounds and being restorable bit for bit are
+// tested in test_kernel.cpp ("apply_kernel keeps every height inside the bounds...",
+// "commit gives the overlay's heights and normals; restore gives back the surface...").
+#include <doctest/doctest.h>
+
+#include <bit>
+#include <cfloat>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <freeform/design/designer.hpp>
+#include <freeform/io/font.hpp>
+#include <freeform/surface/refine.hpp>
+
+#include "support.hpp"
+
+using namespace freeform;
+using namespace freeform::testing;
+
+namespace {
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t k = 0; k < a.size(); ++k)
+        if (std::bit_cast<std::uint32_t>(a[k]) != std::bit_cast<std::uint32_t>(b[k])) return false;
+    return true;
+}
+
+bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
+
+// Everything a design reports that does not depend on the clock.
+void check_identical(const DesignResult& a, const DesignResult& b) {
+    CHECK(same_bits(a.surface.heights(), b.surface.heights()));
+    CHECK(a.irradiance == b.irradiance);
+    CHECK(a.target.cells == b.target.cells);
+    CHECK(same_bits(a.value.error, b.value.error));
+    CHECK(same_bits(a.value.sobel, b.value.sobel));
+    CHECK(same_bits(a.value.energy, b.value.energy));
+    CHECK(same_bits(a.value.penalty, b.value.penalty));
+    CHECK(same_bits(a.value.total, b.value.total));
+    CHECK(a.iterations == b.iterations);
+    CHECK(a.accepted == b.accepted);
+    CHECK(a.rays == b.rays);
+    CHECK(a.bandit_weights == b.bandit_weights);
+    REQUIRE(a.stages.size() == b.stages.size());
+    for (std::size_t k = 0; k < a.stages.size(); ++k) {
+        CAPTURE(k);
+        CHECK(a.stages[k].iterations == b.stages[k].iterations);
+        CHECK(a.stages[k].accepted == b.stages[k].accepted);
+        CHECK(same_bits(a.stages[k].initial_temperature, b.stages[k].initial_temperature));
+        CHECK(same_bits(a.stages[k].error_end, b.stages[k].error_end));
+        CHECK(a.stages[k].stop_reason == b.stages[k].stop_reason);
+        CHECK(a.stages[k].bandit_weights == b.stages[k].bandit_weights);
+    }
+    REQUIRE(a.convergence.size() == b.convergence.size());
+    for (std::size_t k = 0; k < a.convergence.size(); ++k) {
+        CHECK(a.convergence[k].iteration == b.convergence[k].iteration);
+        CHECK(same_bits(a.convergence[k].objective, b.convergence[k].objective));
+        CHECK(same_bits(a.convergence[k].temperature, b.convergence[k].temperature));
+    }
+}
+
+auto never_stop() {
+    return [](const DesignProgress&) { return false; };
+}
+
+// A small two-level case: 9² mesh on a 16² receiver, then 17² on 32².
+struct SmallCase {
+    static constexpr int mesh = 17;
+    Scene scene;
+    ImageD target;
+    DesignOptions options;
+};
+
+SmallCase small_case() {
+    SmallCase c;
+    c.scene = basic_scene(32, 4);
+    c.scene.receiver.deposit = Deposit::bilinear;
+    c.scene.surface.nx = c.scene.surface.ny = SmallCase::mesh;
+    // Target: a ring of light, brighter on one side.
+    c.target = ImageD::Zero(32, 32);
+    for (int y = 0; y < 32; ++y)
+        for (int x = 0; x < 32; ++x) {
+            const double r = std::hypot(x - 15.5, y - 15.5);
+            c.target(y, x) = (r > 4 && r < 9 ? 1.0 : 0.0) * (1.0 + 0.5 * (x > 16));
+        }
+    c.options.time_budget = 0;
+    c.options.seed = 11;
+    c.options.threads = 1;
+    c.options.progress_every = 250;
+    // Explicit levels and iteration budgets (time_budget 0): a deterministic run.
+    LevelPlan coarse, fine;
+    coarse.mesh_x = coarse.mesh_y = 9;
+    coarse.resolution_x = coarse.resolution_y = 16;
+    coarse.kernel_supports = {5};
+    coarse.iterations = 1000;
+    fine.mesh_x = fine.mesh_y = SmallCase::mesh;
+    fine.resolution_x = fine.resolution_y = 32;
+    fine.kernel_supports = {5, 3};
+    fine.iterations = 2000;
+    c.options.levels = {coarse, fine};
+    return c;
+}
+
+DesignResult run(const SmallCase& c, const DesignOptions& o) {
+    return design(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, o, never_stop());
+}
+
+// A scene whose surface mesh is "auto" with a square receiver of r pixels.
+Scene auto_scene(int r) {
+    Scene s = basic_scene(r, 16);
+    s.surface.nx = s.surface.ny = 0;
+    return s;
+}
+
+// A binary target: a bright block with a sharp cut-off (like a headlight's low beam).
+ImageD binary_target(int w, int h) {
+    ImageD t = ImageD::Zero(h, w);
+    t.block(h / 2, w / 8, h / 4, 3 * w / 4) = 1.0;
+    t.block(h / 3, w / 2, h / 6, w / 4) = 1.0;
+    return t;
+}
+
+// A photograph-like target: smooth grey levels everywhere.
+ImageD grey_target(int w, int h) {
+    ImageD t(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) t(y, x) = 0.5 + 0.4 * std::sin(0.05 * x) * std::cos(0.07 * y);
+    return t;
+}
+
+// The error of a surface against a target image, traced with the rays a design with
+// `seed` uses on the scene's receiver.
+double error_of(const Scene& s, const Heightmap& hm, const ImageD& target, std::uint64_t seed) {
+    const RaySet rays = generate_rays(s.light, hm, s.receiver, seed);
+    const Traced t = trace_scene(s, hm, rays);
+    const Target tg = make_target(target, s.receiver.width, s.receiver.height, rays.total);
+    double l1 = 0;
+    for (std::size_t k = 0; k < tg.cells.size(); ++k) l1 += std::abs(double(t.histogram.cells[k]) - double(tg.cells[k]));
+    return l1 / (2.0 * double(tg.total));
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------- refinement
+
+// A tilted plane, h = a + b u + c v, refined by `refine` from several grids to several
+// others: every vertex on the plane (float precision), every normal the plane's.
+template <class Refine>
+void check_plane_refinement(Refine&& refine, double height_tolerance) {
+    const double a = 0.0012, b = 0.031, c = -0.022;  // inside the bounds everywhere
+    const auto plane = [&](double u, double v) { return a + b * u + c * v; };
+    const Vec3d normal = normalize(Vec3d{-b, -c, 1.0});
+    struct Grid {
+        int nx, ny;
+    };
+    const Grid from[] = {{7, 7}, {13, 9}, {25, 25}, {51, 31}};
+    const Grid to[] = {{13, 13}, {25, 17}, {51, 51}, {101, 101}, {40, 33}, {5, 5}};
+    for (const Grid& f : from) {
+        Heightmap hm(f.nx, f.ny, {0.12, 0.08}, -0.005, 0.005);
+        shape(hm, plane);
+        for (const Grid& t : to) {
+            CAPTURE(f.nx);
+            CAPTURE(t.nx);
+            const Heightmap r = refine(hm, t.nx, t.ny);
+            REQUIRE(r.nx() == t.nx);
+            REQUIRE(r.ny() == t.ny);
+            CHECK(r.size().x == hm.size().x);
+            CHECK(r.size().y == hm.size().y);
+            CHECK(r.h_min() == hm.h_min());
+            CHECK(r.h_max() == hm.h_max());
+            double worst_h = 0, worst_n = 0;
+            for (int j = 0; j < r.ny(); ++j)
+                for (int i = 0; i < r.nx(); ++i) {
+                    worst_h = std::max(worst_h, std::abs(double(r(i, j)) - plane(r.u_of(i), r.v_of(j))));
+                    const Vec3 n = r.normals()[std::size_t(j) * r.nx() + i];
+                    worst_n = std::max(worst_n, length(Vec3d{n.x - normal.x, n.y - normal.y, n.z - normal.z}));
+                }
+            CHECK(worst_h <= height_tolerance);
+            CHECK(worst_n < 1e-4);
+        }
+    }
+}
+
+TEST_CASE("refining a tilted plane between levels keeps it a plane") {
+    // Bilinear resampling: exact up to a few float32 ulps of the largest height.
+    check_plane_refinement([](const Heightmap& h, int nx, int ny) { return h.resampled(nx, ny); },
+                           4 * FLT_EPSILON * 0.005);
+    // The designer's refinement, which integrates the coarse shading normals: a plane's
+    // normals are constant, so the integral is the plane again (to the solver's
+    // tolerance, far below a micrometre).
+    check_plane_refinement([](const Heightmap& h, int nx, int ny) { return refine_preserving_normals(h, nx, ny); },
+                           1e-8);
+}
+
+TEST_CASE("refinement keeps the corners and resamples a coarse grid exactly onto its own vertices") {
+    Heightmap hm(7, 5, {0.1, 0.1}, -0.005, 0.005);
+    shape(hm, [](double u, double v) { return 0.003 * std::sin(60 * u) * std::cos(40 * v); });
+    // 7 -> 13 and 5 -> 9 put every old vertex on a new one: those heights are kept exactly.
+    const Heightmap r = hm.resampled(13, 9);
+    for (int j = 0; j < 5; ++j)
+        for (int i = 0; i < 7; ++i) CHECK(r(2 * i, 2 * j) == hm(i, j));
+    // The new vertices between two old ones are their midpoints (bilinear).
+    CHECK(double(r(1, 0)) == doctest::Approx(0.5 * (double(hm(0, 0)) + hm(1, 0))).epsilon(1e-6));
+    CHECK(double(r(1, 1)) ==
+          doctest::Approx(0.25 * (double(hm(0, 0)) + hm(1, 0) + hm(0, 1) + hm(1, 1))).epsilon(1e-6));
+}
+
+// ------------------------------------------------------------------------- the plan
+
+TEST_CASE("plan_levels: a 200² binary target gives 25²/51²/101² meshes on 50²/100²/200²") {
+    Scene s = auto_scene(200);
+    const ImageD t = binary_target(200, 200);
+    CHECK(target_grey_fraction(t) < 0.25);
+    const auto levels = plan_levels(s, &t);
+    REQUIRE(levels.size() == 3);
+    const int mesh[] = {25, 51, 101}, res[] = {50, 100, 200};
+    for (std::size_t k = 0; k < 3; ++k) {
+        CAPTURE(k);
+        CHECK(levels[k].mesh_x == mesh[k]);
+        CHECK(levels[k].mesh_y == mesh[k]);
+        CHECK(levels[k].resolution_x == res[k]);
+        CHECK(levels[k].resolution_y == res[k]);
+        CHECK(levels[k].iterations == 40LL * mesh[k] * mesh[k]);
+        REQUIRE_FALSE(levels[k].kernel_supports.empty());
+        for (std::size_t i = 0; i < levels[k].kernel_supports.size(); ++i) {
+            CHECK(levels[k].kernel_supports[i] % 2 == 1);
+            CHECK(levels[k].kernel_supports[i] >= 3);
+            if (i > 0) CHECK(levels[k].kernel_supports[i] < levels[k].kernel_supports[i - 1]);
+        }
+    }
+    CHECK(levels[0].time_share + levels[1].time_share + levels[2].time_share == doctest::Approx(1.0));
+    CHECK(levels.back().kernel_supports.back() == 5);
+
+    // The same with the mesh given explicitly.
+    s.surface.nx = s.surface.ny = 101;
+    const auto given = plan_levels(s, &t);
+    REQUIRE(given.size() == 3);
+    CHECK(given[0].mesh_x == 25);
+    CHECK(given[1].mesh_x == 51);
+    CHECK(given[2].mesh_x == 101);
+}
+
+TEST_CASE("plan_levels: a 50² headlight-like target gives 7² and 13² meshes on 25² and 50²") {
+    const Scene s = auto_scene(50);
+    const ImageD t = binary_target(50, 50);
+    const auto levels = plan_levels(s, &t);
+    REQUIRE(levels.size() == 2);
+    CHECK(levels[0].mesh_x == 7);
+    CHECK(levels[0].mesh_y == 7);
+    CHECK(levels[0].resolution_x == 25);
+    CHECK(levels[0].resolution_y == 25);
+    CHECK(levels[1].mesh_x == 13);
+    CHECK(levels[1].mesh_y == 13);
+    CHECK(levels[1].resolution_x == 50);
+    CHECK(levels[1].resolution_y == 50);
+    CHECK(levels[0].time_share + levels[1].time_share == doctest::Approx(1.0));
+}
+
+TEST_CASE("plan_levels: a photo-like 200² target gets a 401² final mesh") {
+    const Scene s = auto_scene(200);
+    const ImageD t = grey_target(200, 200);
+    CHECK(target_grey_fraction(t) > 0.25);
+    const auto levels = plan_levels(s, &t);
+    REQUIRE(levels.size() == 3);
+    CHECK(levels.back().mesh_x == 401);
+    CHECK(levels.back().mesh_y == 401);
+    CHECK(levels.back().resolution_x == 200);
+    CHECK(levels[0].resolution_x == 50);
+    CHECK(levels[1].resolution_x == 100);
+    CHECK(levels[0].mesh_x < levels[1].mesh_x);
+    CHECK(levels[1].mesh_x < levels[2].mesh_x);
+    // A photo given at another resolution is judged at the receiver's.
+    const ImageD big = grey_target(600, 600);
+    CHECK(plan_levels(s, &big).back().mesh_x == 401);
+}
+
+TEST_CASE("plan_levels: multilevel off gives one level at the final mesh and resolution") {
+    Scene s = auto_scene(200);
+    s.optimise.multilevel = false;
+    const ImageD t = binary_target(200, 200);
+    const auto levels = plan_levels(s, &t);
+    REQUIRE(levels.size() == 1);
+    CHECK(levels[0].mesh_x == 101);
+    CHECK(levels[0].resolution_x == 200);
+    CHECK(levels[0].time_share == 1.0);
+    CHECK(levels[0].iterations == 40LL * 101 * 101);
+    // Without a target (render), the mesh follows the binary rule.
+    CHECK(plan_levels(s, nullptr).back().mesh_x == 101);
+}
+
+TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every level") {
+    Scene s = basic_scene(240, 16);
+    s.receiver.width = 240;
+    s.receiver.height = 160;
+    s.surface.size = {0.12, 0.08};
+    const ImageD t = binary_target(240, 160);
+    const auto levels = plan_levels(s, &t);
+    REQUIRE(levels.size() == 3);
+    CHECK(levels.back().mesh_x == 121);
+    CHECK(levels.back().mesh_y == 81);
+    for (const auto& l : levels) {
+        CHECK(l.resolution_x * 2 == l.resolution_y * 3);
+        CHECK(double(l.mesh_x - 1) / double(l.mesh_y - 1) == doctest::Approx(1.5).epsilon(0.1));
+    }
+}
+
+// ------------------------------------------------------------------------- reproducibility
+
+TEST_CASE("same seed, same result; any thread count and speculation width, same result") {
+    // One reference run, then the variants (plain code rather than SUBCASEs, which would
+    // repeat the reference run for each).
+    const SmallCase c = small_case();
+    const DesignResult a = run(c, c.options);
+    REQUIRE(a.stages.size() == 3);  // two levels, three kernel stages
+    // Every stage has its level's budget (1000 each) after the bandit's trial run.
+    CHECK(a.iterations == c.options.preprocess_iterations + 3000);
+    CHECK(a.accepted > 0);
+    CHECK(a.surface.nx() == SmallCase::mesh);
+    CHECK(a.value.error < error_of(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, c.options.seed));
+
+    struct Variant {
+        const char* name;
+        int threads, speculative;
+    };
+    const Variant variants[] = {
+        {"same settings again", 1, 0},
+        {"two threads, one proposal per thread", 2, 0},
+        {"two threads, eight proposals at once", 2, 8},
+        {"one thread, four proposals at once", 1, 4},
+    };
+    for (const Variant& v : variants) {
+        CAPTURE(v.name);
+        DesignOptions o = c.options;
+        o.threads = v.threads;
+        o.speculative = v.speculative;
+        check_identical(a, run(c, o));
+    }
+
+    DesignOptions other = c.options;
+    other.seed = 12;
+    const DesignResult b = run(c, other);
+    CHECK_FALSE(same_bits(a.surface.heights(), b.surface.heights()));
+    CHECK_FALSE(a.irradiance == b.irradiance);
+    CHECK(a.value.error != b.value.error);
+}
+
+// With max_iterations below the plan's budget, every level still gets its share (the
+// cap is spread in proportion to the levels' time shares) and the result is complete.
+TEST_CASE("max_iterations below the plan's budget still runs every level and fills the result") {
+    const SmallCase c = small_case();
+    DesignOptions o = c.options;
+    o.max_iterations = o.preprocess_iterations + 900;  // less than the first level's 1000
+    const DesignResult r = run(c, o);
+    CHECK(r.iterations == o.max_iterations);
+    REQUIRE_FALSE(r.stages.empty());
+    CHECK(r.stages.back().level == 1);
+    CHECK(r.irradiance.width == 32);
+    CHECK(r.irradiance.cells.size() == r.target.cells.size());
+    CHECK(r.value.error > 0);
+    CHECK_FALSE(r.bandit_weights.empty());
+}
+
+// ------------------------------------------------------------------------- stopping
+
+TEST_CASE("a callback returning true stops the design; the result holds a valid surface and irradiance") {
+    const SmallCase c = small_case();
+    DesignOptions o = c.options;
+    o.progress_every = 100;
+
+    SUBCASE("stopped in the last level") {
+        int calls = 0;
+        const std::int64_t last_level_start = o.preprocess_iterations + 1000;
+        const DesignResult r = design(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, o, [&](const DesignProgress& p) {
+            ++calls;
+            CHECK(p.levels == 2);
+            return p.level == 1 && p.iteration >= last_level_start + 200;
+        });
+        CHECK(r.stopped_early);
+        CHECK(r.iterations == last_level_start + 200);
+        CHECK(r.stages.back().stop_reason == "callback");
+        CHECK(r.stages.back().level == 1);
+        CHECK(calls >= 8);
+
+        // The surface: final mesh, finite heights inside the bounds.
+        REQUIRE(r.surface.nx() == SmallCase::mesh);
+        REQUIRE(r.surface.ny() == SmallCase::mesh);
+        for (float h : r.surface.heights()) {
+            REQUIRE(std::isfinite(h));
+            REQUIRE(h >= r.surface.h_min());
+            REQUIRE(h <= r.surface.h_max());
+        }
+        // The irradiance is that of the returned surface: a full retrace with the final
+        // level's rays gives it bit for bit, and the reported error is its error.
+        const RaySet rays = generate_rays(c.scene.light, r.surface, c.scene.receiver, o.seed);
+        const Traced full = trace_scene(c.scene, r.surface, rays);
+        CHECK(r.irradiance == full.histogram);
+        CHECK(r.rays == rays.size());
+        double l1 = 0;
+        for (std::size_t k = 0; k < r.target.cells.size(); ++k)
+            l1 += std::abs(double(r.irradiance.cells[k]) - double(r.target.cells[k]));
+        CHECK(r.value.error == doctest::Approx(l1 / (2.0 * double(r.target.total))).epsilon(1e-12));
+        CHECK(r.value.error < error_of(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, o.seed));
+    }
+    SUBCASE("stopped at the first progress point") {
+        int calls = 0;
+        const DesignResult r = design(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, o, [&](const DesignProgress&) {
+            ++calls;
+            return true;
+        });
+        CHECK(r.stopped_early);
+        CHECK(r.iterations == o.preprocess_iterations + 100);
+        REQUIRE(r.stages.size() == 1);
+        CHECK(r.stages[0].stop_reason == "callback");
+        // The surface has the final mesh so that exports have the size asked for.
+        REQUIRE(r.surface.nx() == SmallCase::mesh);
+        REQUIRE(r.surface.ny() == SmallCase::mesh);
+        for (float h : r.surface.heights()) {
+            REQUIRE(std::isfinite(h));
+            REQUIRE(h >= r.surface.h_min());
+            REQUIRE(h <= r.surface.h_max());
+        }
+        REQUIRE(r.irradiance.width > 0);
+        REQUIRE(r.irradiance.cells.size() == r.target.cells.size());
+        CHECK(r.irradiance.total() > 0);
+        CHECK(r.irradiance.total() <= r.target.total);
+        CHECK(std::isfinite(r.value.error));
+    }
+}
+
+// ------------------------------------------------------------------------- end to end
+
+TEST_CASE("designing the irradiance of a known smooth surface gets within 0.05 of it") {
+    // The target is what a gently convex mirror (a paraboloid with a 2 m focal length,
+    // which widens the flat mirror's spot by a quarter) throws onto a 20 x 20 receiver:
+    // a solution with zero error exists (up to ray noise, about 0.006 here), and the
+    // flat start is 0.31 away from it.
+    Scene s = basic_scene(20, 16);
+    s.receiver.deposit = Deposit::bilinear;
+    s.surface.nx = s.surface.ny = 21;
+    Heightmap truth = surface_for(s, 21);
+    shape(truth, [](double u, double v) { return -(u * u + v * v) / (4 * 2.0); });
+    const Traced rendered = trace_scene(s, truth, 7);
+    REQUIRE(rendered.totals.energy() == doctest::Approx(1.0));
+    const ImageD target = rendered.histogram.to_image();
+
+    DesignOptions o;
+    o.time_budget = 0;
+    o.seed = 1;
+    o.threads = 1;
+    // Default settings; one level with 4000 iterations per kernel stage (after the
+    // bandit's trial run). Measured over seeds 1-6: 0.027 to 0.040. (A 0.6 mm Gaussian
+    // bump as the truth gave 0.024 to 0.051 with this budget, 0.021 to 0.043 with 5000.)
+    LevelPlan level;
+    level.mesh_x = level.mesh_y = 21;
+    level.resolution_x = level.resolution_y = 20;
+    level.iterations = 8000;
+    o.levels = {level};
+    const double flat = error_of(s, surface_for(s, 21), target, o.seed);
+    CHECK(flat > 0.25);
+    CHECK(error_of(s, truth, target, o.seed) < 0.01);  // the noise floor
+    const DesignResult r = design(s, surface_for(s, 21), target, o, never_stop());
+    CHECK(r.iterations == o.preprocess_iterations + 8000);
+    CHECK(r.value.error <= 0.05);
+    CHECK(r.value.energy > 0.95);
+    // The reported error is that of the returned surface.
+    CHECK(error_of(s, r.surface, target, o.seed) == doctest::Approx(r.value.error).epsilon(1e-12));
+    MESSAGE("smooth target: error " << r.value.error << " (flat start " << flat << ") after " << r.iterations
+                                    << " iterations");
+}
+
+TEST_CASE("a short letter-E design gets the error down to 0.15") {
+    // 50 x 50 receiver, one level on the planned 13 x 13 mesh. The E is drawn with a
+    // 25 % margin, about the size of the spot the flat mirror throws (half the receiver):
+    // the design redistributes the light rather than first spreading it. The budget is
+    // the plan's own (40 iterations per vertex), without the history bandit's trial run:
+    // measured over seeds 1-6, 0.117 to 0.138 without it, but 0.117 to 0.149 with it
+    // (1000 more iterations): too close to pass reliably.
+    Scene s = basic_scene(50, 4);
+    s.receiver.deposit = Deposit::bilinear;
+    s.surface.nx = s.surface.ny = 0;
+    const ImageF e = io::render_text("E", io::find_font("DejaVuSans-Bold"), 200, 200, 0.25);
+    const ImageD target = e.cast<double>();
+
+    DesignOptions o;
+    o.time_budget = 0;
+    o.seed = 1;
+    o.threads = 1;
+    o.multilevel = false;
+    o.preprocess_iterations = 0;
+    Scene planned = s;
+    planned.optimise = o;
+    std::vector<LevelPlan> levels = plan_levels(planned, &target);
+    REQUIRE(levels.size() == 1);
+    REQUIRE(levels[0].mesh_x == 13);
+    REQUIRE(levels[0].iterations == 40 * 13 * 13);
+    o.levels = levels;
+    const double flat = error_of(s, surface_for(s, 13), target, o.seed);
+    CHECK(flat > 0.4);
+    const DesignResult r = design(s, surface_for(s, 13), target, o, never_stop());
+    CHECK(r.iterations == 40 * 13 * 13);
+    CHECK(r.value.error <= 0.15);
+    MESSAGE("letter E: error " << r.value.error << " (flat start " << flat << ") after " << r.iterations
+                               << " iterations");
+}
