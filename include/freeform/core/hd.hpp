@@ -13,5 +13,16 @@
 #define FREEFORM_DEVICE_COMPILE 0
 #endif
 
+// Small hot helpers that must be inlined: at -O2 GCC's size heuristics keep some out of
+// line, and passing a dozen floats (and spilling the caller's registers) costs more than
+// they compute.
+#if defined(__CUDACC__)
+#define FREEFORM_FORCE_INLINE __forceinline__
+#elif defined(__GNUC__)
+#define FREEFORM_FORCE_INLINE inline __attribute__((always_inline))
+#else
+#define FREEFORM_FORCE_INLINE inline
+#endif
+
 // Assertions inside kernels: checked in debug builds on both host and device.
 #define FREEFORM_KERNEL_ASSERT(cond) assert(cond)

@@ -149,6 +149,16 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* targ
     return levels;
 }
 
+// The penalty terms the options ask for; add terms of your own to it and pass it to
+// design() (objective/penalty.hpp: any type modelling LocalHeightTerm).
+inline Penalties default_penalties(const DesignOptions& o) {
+    Penalties p;
+    p.add(HeightBoundTerm{}, o.height_bound_weight);
+    p.add(ValleyTerm{o.valley_min_angle}, o.valley_weight);
+    p.add(SmoothnessTerm{}, o.smoothness_weight);
+    return p;
+}
+
 namespace design_detail {
 
 // Metres of kernel amplitude per receiver cell of light displacement per grid unit.
@@ -161,13 +171,6 @@ inline double amplitude_unit(const Scene& scene, const Receiver& rec, const Heig
     return cell * std::min(hm.du(), hm.dv()) / (factor * std::max(distance, 1e-6));
 }
 
-inline Penalties make_penalties(const DesignOptions& o) {
-    Penalties p;
-    p.add(HeightBoundTerm{}, o.height_bound_weight);
-    p.add(ValleyTerm{o.valley_min_angle}, o.valley_weight);
-    p.add(SmoothnessTerm{}, o.smoothness_weight);
-    return p;
-}
 
 // The kernel bank of a stage; `kept` (when not empty) lists the shapes the bandit's
 // pre-process kept (indices into default_kernel_bank, the same at every support).
@@ -225,7 +228,7 @@ namespace design_detail {
 
 template <class Backend, class Callback>
 DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
-                         const DesignOptions& options, Callback&& callback) {
+                         const DesignOptions& options, Callback&& callback, const Penalties& penalties) {
     using Problem = BasicReflectorProblem<Backend>;
     using clock = std::chrono::steady_clock;
     const auto t_start = clock::now();
@@ -237,7 +240,6 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     for (std::size_t k = 0; k < levels.size(); ++k)
         if (levels[k].kernel_supports.empty())
             levels[k].kernel_supports = level_kernel_supports(levels, k);
-    const Penalties penalties = design_detail::make_penalties(options);
     const int threads = thread_count(exec::omp_t{options.threads});
     DesignResult result;
     std::int64_t total_iterations = 0;
@@ -358,13 +360,11 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             const auto stage_start = elapsed();
             const std::int64_t base_iteration = total_iterations;
             struct Hooks {
-                const DesignResult* result;
                 Problem* problem;
                 std::vector<ConvergencePoint>* convergence;
                 std::remove_reference_t<Callback>* user;
                 DesignProgress info;
                 std::int64_t base;
-                double stage_start;
                 const decltype(elapsed)* clock;
                 double budget;
                 bool stopped = false;
@@ -385,8 +385,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                     return stopped;
                 }
             };
-            Hooks hooks{&result, &problem, &result.convergence, &callback, {}, base_iteration, stage_start, &elapsed,
-                        options.time_budget};
+            Hooks hooks{&problem, &result.convergence, &callback, {}, base_iteration, &elapsed, options.time_budget};
             hooks.info.level = int(li);
             hooks.info.levels = int(levels.size());
             hooks.info.stage = int(si);
@@ -459,14 +458,23 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 // (relative irradiance, any resolution). `callback(const DesignProgress&)` is called
 // every options.progress_every iterations and may return true to stop (the best state
 // so far is kept). options.evaluation picks incremental (default) or full retraces.
+// `penalties` replaces the height terms the options ask for (default_penalties(options))
+// when a caller adds terms of its own.
+template <class Callback>
+DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
+                    Callback&& callback, const Penalties& penalties) {
+    if (options.evaluation == "full")
+        return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
+                                                              std::forward<Callback>(callback), penalties);
+    return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
+                                                          std::forward<Callback>(callback), penalties);
+}
+
 template <class Callback>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback) {
-    if (options.evaluation == "full")
-        return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
-                                                              std::forward<Callback>(callback));
-    return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
-                                                          std::forward<Callback>(callback));
+    return design(scene, std::move(initial), target_image, options, std::forward<Callback>(callback),
+                  default_penalties(options));
 }
 
 }  // namespace freeform

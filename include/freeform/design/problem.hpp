@@ -98,7 +98,6 @@ public:
         penalty_sum_ = penalties_->full(*surface_);
         value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
         best_is_current_ = true;
-        best_value_ = value_.total;
         refresh_error_weights();
     }
 
@@ -113,7 +112,6 @@ public:
     Histogram histogram() const { return trace_.histogram(); }
 
     void propose(CounterRng& rng, double temperature, Move& m) {
-        const int nx = surface_->nx(), ny = surface_->ny();
         int ci, cj;
         choose_centre(rng, ci, cj);
         const double shift = std::max(proposals_.min_shift_cells,
@@ -129,7 +127,6 @@ public:
             const double width = std::sqrt(k.sigma_x * k.sigma_y) / 0.6;
             apply_kernel(*surface_, kernels_[std::size_t(m.arm)], ci, cj, float(s * unit_ * width), m.overlay);
         }
-        (void)nx, (void)ny;
         m.overlay.trim(*surface_);
         m.noop = m.overlay.empty();
     }
@@ -176,7 +173,6 @@ public:
 
     void on_new_best() {
         best_is_current_ = true;
-        best_value_ = value_.total;
         best_heights_.clear();
     }
 
@@ -242,7 +238,6 @@ private:
     ObjectiveValue value_;
     std::int64_t penalty_sum_ = 0;
     bool best_is_current_ = true;
-    double best_value_ = 0;
     std::vector<float> best_heights_;
     double max_error_ = 0;
 };

@@ -14,15 +14,6 @@
 #include "../surface/overlay.hpp"
 #include "path.hpp"
 
-// Small hot helpers of the walk that must be inlined: at -O2 GCC's size heuristics keep
-// them out of line, and passing a dozen floats costs more than they compute.
-#if defined(__CUDACC__)
-#define FREEFORM_HF_INLINE __forceinline__
-#elif defined(__GNUC__)
-#define FREEFORM_HF_INLINE inline __attribute__((always_inline))
-#else
-#define FREEFORM_HF_INLINE inline
-#endif
 
 namespace freeform {
 
@@ -85,17 +76,17 @@ struct Corners {
 };
 
 template <class View>
-FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const View& hf, int ci, int cj) {
+FREEFORM_HD FREEFORM_FORCE_INLINE Corners corners(const View& hf, int ci, int cj) {
     return {hf.height(ci, cj), hf.height(ci + 1, cj), hf.height(ci, cj + 1), hf.height(ci + 1, cj + 1)};
 }
-FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const HeightfieldView& hf, int ci, int cj) {
+FREEFORM_HD FREEFORM_FORCE_INLINE Corners corners(const HeightfieldView& hf, int ci, int cj) {
     const float* p = hf.h + (cj * hf.nx + ci);
     return {p[0], p[1], p[hf.nx], p[hf.nx + 1]};
 }
 // One range test for the cell's 2 x 2 vertices instead of one per vertex. The rays an
 // evaluation retraces are those crossing the move, so cells wholly inside the overlay
 // are as common as cells wholly outside it.
-FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const OverlayView& hf, int ci, int cj) {
+FREEFORM_HD FREEFORM_FORCE_INLINE Corners corners(const OverlayView& hf, int ci, int cj) {
     // Cell (ci, cj) spans vertices a..a+1 and b..b+1 of the overlay (unsigned: below it wraps).
     const unsigned a = unsigned(ci - hf.pi0), b = unsigned(cj - hf.pj0);
     if (a + 1u <= unsigned(hf.pw) && b + 1u <= unsigned(hf.ph)) {  // touches the overlay
@@ -111,12 +102,12 @@ FREEFORM_HD FREEFORM_HF_INLINE Corners corners(const OverlayView& hf, int ci, in
 // The normals of triangle k of cell (ci, cj): vertices (ci, cj), (ci + 1, cj + k) and
 // (ci + 1 - k, cj + 1).
 template <class View>
-FREEFORM_HD FREEFORM_HF_INLINE void triangle_normals(const View& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
+FREEFORM_HD FREEFORM_FORCE_INLINE void triangle_normals(const View& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
     n[0] = hf.normal(ci, cj);
     n[1] = hf.normal(ci + 1, cj + k);
     n[2] = hf.normal(ci + 1 - k, cj + 1);
 }
-FREEFORM_HD FREEFORM_HF_INLINE void triangle_normals(const OverlayView& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
+FREEFORM_HD FREEFORM_FORCE_INLINE void triangle_normals(const OverlayView& hf, int ci, int cj, int k, Vec3 (&n)[3]) {
     const unsigned a = unsigned(ci - hf.ni0), b = unsigned(cj - hf.nj0);  // below: wraps
     const unsigned aw = unsigned(hf.nw > 0 ? hf.nw - 1 : 0), bh = unsigned(hf.nh > 0 ? hf.nh - 1 : 0);
     if (a < aw && b < bh) {  // the cell's four vertices all lie in the overlay
@@ -136,7 +127,7 @@ FREEFORM_HD FREEFORM_HF_INLINE void triangle_normals(const OverlayView& hf, int 
 // (v00, v11, v01) with weights (1-b, a, b-a); written as selects on k, not branches
 // (which triangle is hit is a coin toss to the branch predictor).
 template <class View>
-FREEFORM_HD FREEFORM_HF_INLINE void set_hit(const View& hf, const Grid& g, const Corners& c, int ci, int cj, int k,
+FREEFORM_HD FREEFORM_FORCE_INLINE void set_hit(const View& hf, const Grid& g, const Corners& c, int ci, int cj, int k,
                                             float t, float a, float b, SurfaceHit& hit) {
     hit.kind = HitKind::surface;
     hit.t = t;
@@ -160,7 +151,7 @@ FREEFORM_HD FREEFORM_HF_INLINE void set_hit(const View& hf, const Grid& g, const
 // triangle up to eps, seen from the wanted side), or infinity. (a, b) receives the
 // cell-local hit point.
 template <bool Front>
-FREEFORM_HD FREEFORM_HF_INLINE float triangle_t(int k, const Corners& c, float ao, float bo, float ez, float ad,
+FREEFORM_HD FREEFORM_FORCE_INLINE float triangle_t(int k, const Corners& c, float ao, float bo, float ez, float ad,
                                                 float bd, float dz, float t_min, float& a, float& b) {
     // Plane z = h00 + A a + B b; denom = d · (-A/du, -B/dv, 1) is negative when the ray
     // meets the front.
@@ -212,7 +203,7 @@ FREEFORM_HD inline bool clip_to_grid(const Grid& g, float gox, float goy, float 
 // hit. The segment is the cell-local ray (ao + ad t, bo + bd t, ez + dz t) for t from tc
 // to tc_end; t0 is where the segment starts on the ray.
 template <bool Front, class View>
-FREEFORM_HD FREEFORM_HF_INLINE bool cell_hit(const View& hf, const Grid& g, int ci, int cj, float gx, float gy,
+FREEFORM_HD FREEFORM_FORCE_INLINE bool cell_hit(const View& hf, const Grid& g, int ci, int cj, float gx, float gy,
                                              float ez, float ad, float bd, float dz, float tc, float tc_end, float t0,
                                              std::int32_t exclude, SurfaceHit& hit) {
     if (!hf.cell_active(ci, cj)) return false;
@@ -376,4 +367,3 @@ FREEFORM_HD inline RayRecord trace_heightfield_ray(const View& hf, const PathPar
 
 }  // namespace freeform
 
-#undef FREEFORM_HF_INLINE

@@ -106,16 +106,24 @@ private:
     std::int64_t waste_ = 0;
 };
 
-// Collects the distinct surface cells a traced path crosses.
+// Collects the surface cells a traced path crosses. Called for every cell of every walk,
+// so it only skips an immediate repeat and is forced inline (an out-of-line call makes
+// the walk spill its registers); finish() removes the remaining repeats once per ray.
 struct CellCollector {
     std::vector<std::int32_t>* out;
     std::size_t first;  // where this ray's cells start in *out
     int cells_per_row;
-    void operator()(int ci, int cj) const {
+    FREEFORM_FORCE_INLINE void operator()(int ci, int cj) const {
         const std::int32_t c = cj * cells_per_row + ci;
-        for (std::size_t k = first; k < out->size(); ++k)
-            if ((*out)[k] == c) return;
+        if (out->size() > first && out->back() == c) return;
         out->push_back(c);
+    }
+    // Sorts this ray's cells and drops repeats (paths that come back over a cell).
+    void finish() const {
+        if (out->size() - first < 2) return;
+        const auto begin = out->begin() + std::ptrdiff_t(first);
+        std::sort(begin, out->end());
+        out->erase(std::unique(begin, out->end()), out->end());
     }
 };
 
@@ -181,6 +189,7 @@ public:
                 CellCollector visit{&cells, cells.size(), surface_->nx() - 1};
                 records_[std::size_t(k)] = trace_heightfield_ray(hf, params_, rays_->origin[std::size_t(k)],
                                                                  rays_->direction[std::size_t(k)], visit);
+                visit.finish();
             }
             starts.push_back(std::int64_t(cells.size()));
         });
@@ -210,6 +219,7 @@ public:
             cells.clear();
             CellCollector visit{&cells, 0, surface_->nx() - 1};
             records_[std::size_t(k)] = retrace(std::int32_t(k), visit);
+            visit.finish();
             index_.assign(std::int32_t(k), cells);
         }
         status_weight_.fill(0);
@@ -291,6 +301,7 @@ private:
             change.cell_begin[k] = std::int32_t(change.cells.size());
             CellCollector visit{&change.cells, change.cells.size(), cells_per_row};
             const RayRecord now = retrace(id, visit);
+            visit.finish();
             change.records[k] = now;
             const RayRecord& before = records_[std::size_t(id)];
             if (now == before) continue;
