@@ -6,13 +6,11 @@
 //             [--case-patch JSON] [--patch JSON] [--label NAME] [--eval-seed N]
 //             [--control N] [--kernel-supports K] [--mesh-scale K] [--rays-scale F]
 //             [--check-render] [--compare-tracers] [--save-images PREFIX]
-//   study_run --selftest S.json [--iterations N] [--threads T]
 //
 // Engines:
-//   design        the library's designer, freeform::design() (ours and every ablation
-//                 that the scene's "optimise"/"surface" keys express, via --patch)
-//   design-full   our designer judging every proposal by a full retrace (variant_design.hpp)
-//   design-one-kernel  our designer with a one-shape kernel bank (variant_design.hpp)
+//   design        the library's designer, freeform::design(): ours and every variant of it
+//                 (ablations, full-retrace evaluation, one kernel shape, ...) is a --patch of
+//                 the scene's "optimise"/"surface"/"light" keys
 //   spsa          SPSA on the control grid (spsa.hpp)
 //   pagmo-sa, pagmo-cmaes, pagmo-xnes, pagmo-sade   pagmo2 on the control grid (generic.hpp)
 //   nlopt-bobyqa, nlopt-crs2                        NLopt on the control grid (generic.hpp)
@@ -21,6 +19,7 @@
 // case: its receiver, its light, its seed; see common.hpp), the work done (iterations,
 // evaluations, per second), the model the method used, the trace of its progress and
 // engine-specific details. Exit code 2 on bad input, 3 when an engine is not built in.
+#include <bit>
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -32,14 +31,13 @@
 #include "control_grid.hpp"
 #include "generic.hpp"
 #include "spsa.hpp"
-#include "variant_design.hpp"
 
 namespace {
 
 using namespace study;
 
 struct Args {
-    fs::path scene, out, selftest;
+    fs::path scene, out;
     std::string engine = "design", label, case_patch, patch, save_images;
     std::uint64_t seed = 1;
     std::optional<std::uint64_t> eval_seed;
@@ -51,7 +49,6 @@ struct Args {
     double rays_scale = 1;
     bool check_render = false, compare_tracers = false;
     std::int64_t progress_every = 200;
-    std::int64_t selftest_iterations = 1500;
     SpsaSettings spsa;
 };
 
@@ -96,6 +93,16 @@ void save_images(const std::string& prefix, const Evaluation& e, const Heightmap
     for (int j = 0; j < surface.ny(); ++j)
         for (int i = 0; i < surface.nx(); ++i) h(surface.ny() - 1 - j, i) = surface(i, j);
     io::write_pfm(prefix + "-heightmap.pfm", h);
+}
+
+// A fingerprint of the designed heights, bit for bit: two runs that followed the same
+// trajectory (full against incremental evaluation, same seed) end with the same one.
+std::string heights_fingerprint(const Heightmap& h) {
+    std::uint64_t x = hash_combine(std::uint64_t(h.nx()), std::uint64_t(h.ny()));
+    for (const float v : h.heights()) x = hash_combine(x, std::bit_cast<std::uint32_t>(v));
+    char text[17];
+    std::snprintf(text, sizeof text, "%016llx", (unsigned long long)x);
+    return text;
 }
 
 std::vector<TracePoint> trace_of(const DesignResult& r) {
@@ -164,7 +171,7 @@ int run(const Args& a) {
     int trace_levels = 1;
     const auto start = Clock::now();
 
-    if (a.engine == "design" || a.engine == "design-full" || a.engine == "design-one-kernel") {
+    if (a.engine == "design") {
         DesignOptions o = run_scene.optimise;
         o.seed = a.seed;
         o.time_budget = a.time_budget;
@@ -176,17 +183,8 @@ int run(const Args& a) {
             o.levels = plan_levels(planned, &run_target);
             for (auto& l : o.levels) l.kernel_supports = {a.kernel_supports};
         }
-        Heightmap initial = io::make_initial_heightmap(run_scene, nx, ny);
-        DesignResult r;
-        FullEvaluationStats full_stats;
-        if (a.engine == "design") {
-            r = design(run_scene, std::move(initial), run_target, o, [](const DesignProgress&) { return false; });
-        } else {
-            VariantSettings v;
-            v.evaluation = a.engine == "design-full" ? EvaluationMode::full : EvaluationMode::incremental;
-            v.bank = a.engine == "design-one-kernel" ? BankChoice::one_isotropic : BankChoice::standard;
-            r = design_variant(run_scene, std::move(initial), run_target, o, v, full_stats);
-        }
+        DesignResult r = design(run_scene, io::make_initial_heightmap(run_scene, nx, ny), run_target, o,
+                                [](const DesignProgress&) { return false; });
         const double seconds = seconds_since(start);
         trace = trace_of(r);
         std::int64_t proposals = 0;
@@ -201,6 +199,11 @@ int run(const Args& a) {
         out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
         out["stages"] = levels_json(r.stages);
         out["bandit"] = o.bandit;
+        out["evaluation"] = o.evaluation;
+        out["kernel_shapes"] = o.kernel_shapes;
+        out["max_iterations"] = o.max_iterations;
+        out["stop_reasons"] = json::array();
+        for (const auto& s : r.stages) out["stop_reasons"].push_back(s.stop_reason);
         out["bandit_weights"] = r.bandit_weights;
         json bank = json::array();
         for (const auto& k : r.kernel_bank) {
@@ -219,11 +222,6 @@ int run(const Args& a) {
         }
         out["kernel_bank"] = bank;
         out["preprocess_rates"] = r.preprocess_rates;
-        if (a.engine == "design-full")
-            out["full_evaluation"] = {{"full_deltas", full_stats.full_deltas},
-                                      {"accepted_checked", full_stats.checked},
-                                      {"mismatches", full_stats.mismatches},
-                                      {"seconds_in_full_deltas", full_stats.seconds_in_full_deltas}};
         model["levels"] = json::array();
         for (const auto& s : r.stages)
             if (model["levels"].empty() || model["levels"].back()["level"] != s.level)
@@ -267,8 +265,8 @@ int run(const Args& a) {
 #endif
         } else {
             throw InputError("--engine: unknown engine '" + a.engine +
-                             "' (design, design-full, design-one-kernel, spsa, pagmo-sa, pagmo-cmaes, pagmo-xnes, "
-                             "pagmo-sade, nlopt-bobyqa, nlopt-crs2)");
+                             "' (design, spsa, pagmo-sa, pagmo-cmaes, pagmo-xnes, pagmo-sade, nlopt-bobyqa, "
+                             "nlopt-crs2)");
         }
         f.close_trace();
         const double seconds = seconds_since(start);
@@ -293,6 +291,7 @@ int run(const Args& a) {
     const double alpha = run_scene.surface.phong_alpha;
     const Evaluation final_eval = evaluate(judge, result_surface, alpha, target, eval_seed, a.threads);
     out["final"] = evaluation_json(final_eval);
+    out["final"]["heights_fingerprint"] = heights_fingerprint(result_surface);
     if (a.check_render) {
         // Judged again on 4x the rays with a fresh jitter: does the design fit the light,
         // or the particular rays it was optimised with?
@@ -321,51 +320,13 @@ int run(const Args& a) {
     return 0;
 }
 
-// The variant designer must reproduce the library's designer exactly (incremental, standard
-// bank), and the full-evaluation variant must follow the same trajectory.
-int selftest(const Args& a) {
-    Scene scene = io::load_scene(a.selftest);
-    const ImageD target = io::load_target_image(scene);
-    const auto [nx, ny] = final_mesh_of(scene, target);
-    DesignOptions o = scene.optimise;
-    o.time_budget = 1e6;  // with a fixed iteration budget the runs are deterministic
-    o.max_iterations = a.selftest_iterations;
-    o.threads = a.threads;
-    const auto t0 = Clock::now();
-    const DesignResult lib = design(scene, io::make_initial_heightmap(scene, nx, ny), target, o,
-                                    [](const DesignProgress&) { return false; });
-    const double t_lib = seconds_since(t0);
-    FullEvaluationStats stats;
-    const auto t1 = Clock::now();
-    const DesignResult inc = design_variant(scene, io::make_initial_heightmap(scene, nx, ny), target, o, {}, stats);
-    const double t_inc = seconds_since(t1);
-    const auto t2 = Clock::now();
-    const DesignResult full = design_variant(scene, io::make_initial_heightmap(scene, nx, ny), target, o,
-                                             {EvaluationMode::full, BankChoice::standard}, stats);
-    const double t_full = seconds_since(t2);
-    const bool same_inc = lib.surface.heights() == inc.surface.heights() && lib.iterations == inc.iterations;
-    const bool same_full = lib.surface.heights() == full.surface.heights() && lib.iterations == full.iterations;
-    // The objective at the end of the last stage run (DesignResult::value stays empty when an
-    // iteration cap ends the design before its last level).
-    const auto last_objective = [](const DesignResult& r) { return r.stages.empty() ? 0.0 : r.stages.back().objective_end; };
-    std::printf("selftest %s, %lld iterations (history pre-process included) in %zu stages:\n",
-                a.selftest.string().c_str(), (long long)lib.iterations, lib.stages.size());
-    std::printf("  library designer       %.2f s, objective %.6f\n", t_lib, last_objective(lib));
-    std::printf("  variant, incremental   %.2f s, objective %.6f: %s\n", t_inc, last_objective(inc),
-                same_inc ? "identical heights" : "DIFFERENT");
-    std::printf("  variant, full retrace  %.2f s, objective %.6f: %s (%lld accepted deltas checked, %lld mismatches)\n",
-                t_full, last_objective(full), same_full ? "identical heights" : "DIFFERENT", (long long)stats.checked,
-                (long long)stats.mismatches);
-    return same_inc && same_full && stats.mismatches == 0 ? 0 : 1;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
     Args a;
     CLI::App app{"study_run: one run of the freeform speed/accuracy study (see benchmarks/study/README.md)"};
     app.add_option("--scene", a.scene, "case scene file");
-    app.add_option("--engine", a.engine, "design, design-full, design-one-kernel, spsa, pagmo-*, nlopt-*");
+    app.add_option("--engine", a.engine, "design, spsa, pagmo-*, nlopt-*");
     app.add_option("--label", a.label, "method name recorded in the result");
     app.add_option("--case-patch", a.case_patch, "JSON merge patch that defines the case (stress cases)");
     app.add_option("--patch", a.patch, "JSON merge patch of the method (applies to the run only)");
@@ -384,16 +345,13 @@ int main(int argc, char** argv) {
     app.add_flag("--compare-tracers", a.compare_tracers, "also render the result with the Embree tracer");
     app.add_option("--save-images", a.save_images, "write PREFIX-{irradiance,target,heightmap}.pfm");
     app.add_option("--out", a.out, "result JSON file");
-    app.add_option("--selftest", a.selftest, "check the variant designer against the library's on SCENE");
-    app.add_option("--iterations", a.selftest_iterations, "iterations of the selftest");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         return app.exit(e) == 0 ? 0 : 2;
     }
     try {
-        if (!a.selftest.empty()) return selftest(a);
-        if (a.scene.empty() || a.out.empty()) throw InputError("--scene and --out are required (or --selftest)");
+        if (a.scene.empty() || a.out.empty()) throw InputError("--scene and --out are required");
         return run(a);
     } catch (const NotBuilt& e) {
         std::fprintf(stderr, "study_run: %s\n", e.what());

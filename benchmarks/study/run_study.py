@@ -2,9 +2,9 @@
 """The speed/accuracy study of freeform: runs study_run over cases x methods x seeds,
 then aggregates, plots and writes REPORT.md (see benchmarks/study/README.md).
 
-  run_study.py --quick          ~3.5 minutes: E and headlight, 5 methods, 3 seeds, short budgets
-                                -> benchmarks/results/quick/
-  run_study.py                  the full study (about 4.5 hours on 2 cores) -> benchmarks/results/
+  run_study.py --quick          ~7 minutes: E and headlight, 5 methods and a few variants of ours,
+                                3 seeds, short budgets -> benchmarks/results/quick/
+  run_study.py                  the full study (about 4.7 hours on 2 cores) -> benchmarks/results/
   run_study.py --report-only    re-aggregate the runs already on disk
 
 Runs are sequential (each with --threads, recorded) and resumable: a run whose result file
@@ -108,7 +108,7 @@ def config_of(cmd: list[str]) -> list[str]:
 
 
 def estimate(runs: list[plan.Run]) -> float:
-    return sum(r.budget + OVERHEAD.get(r.case, DEFAULT_OVERHEAD) for r in runs)
+    return sum(plan.expected_seconds(r) + OVERHEAD.get(r.case, DEFAULT_OVERHEAD) for r in runs)
 
 
 def fmt_duration(s: float) -> str:
@@ -118,13 +118,14 @@ def fmt_duration(s: float) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="the quick subset (about 3.5 minutes)")
+    ap.add_argument("--quick", action="store_true", help="the quick subset (about 7 minutes)")
     ap.add_argument("--bin", type=Path, default=ROOT / "build/release/bin", help="where study_run is")
     ap.add_argument("--out", type=Path, help="results directory (default benchmarks/results[/quick])")
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="threads per run (default: all cores)")
     ap.add_argument("--cases", help="comma-separated subset of cases")
     ap.add_argument("--methods", help="comma-separated subset of methods")
-    ap.add_argument("--purposes", help="comma-separated subset of purposes (main, ablation, extra, stress, ladder, model)")
+    ap.add_argument("--purposes", help="comma-separated subset of purposes (main, ablation, extra, stress, ladder, "
+                    "model, evaluation; quick mode: quick, evaluation)")
     ap.add_argument("--seeds", type=int, help="at most this many seeds per group (a cheaper, less certain study)")
     ap.add_argument("--fresh", action="store_true", help="repeat runs whose results exist")
     ap.add_argument("--report-only", action="store_true", help="only aggregate the runs on disk")
@@ -171,14 +172,6 @@ def main() -> int:
                      "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
                      "planned_runs": len(runs), "estimated_seconds": estimate(runs)})
         start = time.monotonic()
-        # The variant designer (full retrace, one kernel) re-implements the library's loop:
-        # check first that it still reproduces freeform::design() move for move.
-        iters = "1100" if args.quick else "4000"
-        st = subprocess.run([str(binary), "--selftest", str(ROOT / "examples/scenes/headlight.json"), "--iterations",
-                             iters, "--threads", str(args.threads)], cwd=ROOT, capture_output=True, text=True)
-        meta["selftest"] = {"passed": st.returncode == 0, "output": (st.stdout + st.stderr).strip()}
-        print(("selftest passed: " if st.returncode == 0 else "SELFTEST FAILED: ") + st.stdout.strip().replace(
-            "\n", " | "), flush=True)
         unavailable: dict[str, str] = {}
         failed: list[dict] = []
         done = skipped = 0
@@ -203,7 +196,7 @@ def main() -> int:
             left = estimate(runs[k:])
             print(f"[{k + 1}/{len(runs)} {fmt_duration(elapsed)} elapsed, ~{fmt_duration(left)} left] {r.key}",
                   flush=True)
-            timeout = 3 * r.budget + 180
+            timeout = 3 * plan.expected_seconds(r) + 180
             try:
                 p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
             except subprocess.TimeoutExpired:

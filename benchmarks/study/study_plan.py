@@ -2,8 +2,9 @@
 
 A run is (case, method, seed, time budget). Cases are public scenes, some with a JSON merge
 patch that turns them into a stress case; methods are an engine of study_run with a patch
-of the scene's "optimise"/"surface"/"light" keys and a few driver options. Everything the
-report says about a method's settings comes from here and from the result files.
+of the scene's "optimise"/"surface"/"light" keys and a few driver options. Every variant
+of ours is the library's freeform::design() with such a patch (engine "design"). Everything
+the report says about a method's settings comes from here and from the result files.
 """
 from __future__ import annotations
 
@@ -29,8 +30,14 @@ class Method:
     title: str
     patch: dict = field(default_factory=dict)
     options: tuple = ()             # extra study_run arguments
-    family: str = "ours"            # ours | ablation | baseline | stress
+    family: str = "ours"            # ours | ablation | baseline | stress | model | evaluation
     judged_with_check: bool = False  # also judged on 4x rays (--check-render)
+    # Methods stopped by an iteration cap (optimise.max_iterations) rather than by time: their
+    # time budget is only a safety cap, far above what they need, so that no stage is cut
+    # short; `expected` (case -> seconds, measured on the 2-core development machine) is what
+    # the plan's estimate counts for them.
+    time_cap: float = 0.0
+    expected: dict = field(default_factory=dict)
 
 
 # --- cases -------------------------------------------------------------------------------
@@ -81,6 +88,11 @@ SIMPLE_CASES = ["E", "V", "at", "headlight", "point", "lens"]  # failure rate 0 
 
 # --- methods -----------------------------------------------------------------------------
 
+# The evaluation pairs (ours-fixed / ours-full-eval-fixed): iterations over the whole design
+# (the history bandit's 1000-move pre-process included) and the safety time cap (seconds).
+PAIR_ITERATIONS = 2000
+PAIR_CAP = 3600.0
+
 _NO_PENALTIES = {"energy_threshold": 0, "sobel_weight": 0, "lost_light_weight": 0}
 
 METHODS = {m.name: m for m in [
@@ -102,8 +114,15 @@ METHODS = {m.name: m for m in [
     Method("ours-ucb1", "design", "ours with the UCB1 bandit", patch={"optimise": {"bandit": "ucb1"}}),
     Method("ours-ducb", "design", "ours with the discounted-UCB bandit",
            patch={"optimise": {"bandit": "discounted-ucb"}}),
-    Method("ours-one-kernel", "design-one-kernel", "ours with one kernel shape (isotropic σ = support/4)"),
-    Method("ours-full-eval", "design-full", "ours judging every proposal by a full retrace (no incremental evaluation)"),
+    Method("ours-one-kernel", "design", "ours with one kernel shape (isotropic σ = support/4, no pre-process)",
+           patch={"optimise": {"kernel_shapes": "isotropic"}}),
+    # Full retraces are slow: sample the trace every 20 moves, not every 200.
+    Method("ours-full-eval", "design", "ours judging every proposal by a full retrace of every ray "
+           "(optimise.evaluation \"full\"), same time budget", patch={"optimise": {"evaluation": "full"}},
+           options=("--progress-every", "20")),
+    Method("ours-no-lost-light", "design", "ours with the reference's objective: no lost-light term "
+           "(optimise.lost_light_weight 0; the energy threshold stays)",
+           patch={"optimise": {"lost_light_weight": 0}}, family="ablation"),
     Method("ours-single-level", "design", "ours without the multi-level schedule",
            patch={"optimise": {"multilevel": False}}),
     Method("ours-flat", "design", "ours with flat triangles (Phong α = 0)", patch={"surface": {"phong_alpha": 0}}),
@@ -117,6 +136,21 @@ METHODS = {m.name: m for m in [
            options=("--mesh-scale", "2"), family="model", judged_with_check=True),
     Method("ours-rays4x", "design", "ours with 4x the rays on the final level",
            options=("--rays-scale", "4"), family="model", judged_with_check=True),
+    # Full against incremental evaluation at a fixed iteration count, same seed: the two must
+    # end with the same heights bit for bit (the incremental objective is exact), so the
+    # ratio of their speeds is the speed-up of incremental evaluation at equal work. The
+    # repeat runs the incremental design again: a fixed iteration count must make a design
+    # reproducible, or the comparison means nothing.
+    Method("ours-fixed", "design", f"ours stopped after {PAIR_ITERATIONS} iterations, incremental evaluation",
+           patch={"optimise": {"max_iterations": PAIR_ITERATIONS}}, options=("--progress-every", "20"),
+           family="evaluation", time_cap=PAIR_CAP, expected={"headlight": 3.5, "E": 6.5}),
+    Method("ours-fixed-repeat", "design", "ours-fixed again (same seed): is the design reproducible?",
+           patch={"optimise": {"max_iterations": PAIR_ITERATIONS}}, options=("--progress-every", "20"),
+           family="evaluation", time_cap=PAIR_CAP, expected={"headlight": 3.5, "E": 6.5}),
+    Method("ours-full-eval-fixed", "design", f"ours stopped after {PAIR_ITERATIONS} iterations, every proposal "
+           "judged by a full retrace", patch={"optimise": {"max_iterations": PAIR_ITERATIONS, "evaluation": "full"}},
+           options=("--progress-every", "20"), family="evaluation", time_cap=PAIR_CAP,
+           expected={"headlight": 8.5, "E": 115}),
     # Baselines on the same tracer and objective (control grid, see control_grid.hpp).
     Method("spsa", "spsa", "SPSA (Spall gains a_k = a/(k+1+A)^0.602, c_k = c/(k+1)^0.101), 13² control grid",
            family="baseline"),
@@ -143,7 +177,7 @@ class Run:
     method: str
     seed: int
     budget: float
-    purpose: str          # main | ablation | extra | stress | ladder | model | quick
+    purpose: str          # main | ablation | extra | stress | ladder | model | evaluation | quick
     save_images: bool = False
 
     @property
@@ -157,9 +191,22 @@ def _grid(cases, methods, seeds, purpose, budget_scale=1.0, quick=False, save_fi
         case = CASES[c]
         b = (case.quick_budget if quick else case.budget) * budget_scale
         for m in methods:
+            cap = METHODS[m].time_cap
             for i, s in enumerate(seeds):
-                runs.append(Run(c, m, s, round(b, 3), purpose, save_images=save_first and i == 0))
+                runs.append(Run(c, m, s, round(cap or b, 3), purpose, save_images=save_first and i == 0))
     return runs
+
+
+def expected_seconds(run: Run) -> float:
+    """The optimisation time a run is expected to take (start-up and renders not included)."""
+    m = METHODS[run.method]
+    return m.expected.get(run.case, run.budget) if m.time_cap else run.budget
+
+
+def evaluation_pairs(cases, seeds, purpose):
+    """Full against incremental evaluation at a fixed iteration count, and one repeat."""
+    return (_grid(cases, ["ours-fixed", "ours-full-eval-fixed"], seeds, purpose)
+            + _grid(cases, ["ours-fixed-repeat"], seeds[:1], purpose))
 
 
 SEEDS = list(range(101, 111))   # never the cases' own seed (1), which judges every run
@@ -170,14 +217,16 @@ def full_plan() -> list[Run]:
     runs += _grid(PUBLIC_CASES, ["ours"] + MAIN_BASELINES, SEEDS, "main", save_first=True)
     runs += _grid(["E", "headlight"], ["sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform",
                                        "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-full-eval",
-                                       "ours-single-level", "ours-flat"], SEEDS, "ablation")
+                                       "ours-single-level", "ours-flat", "ours-no-lost-light"], SEEDS, "ablation")
+    runs += evaluation_pairs(["headlight", "E"], SEEDS[:3], "evaluation")
     runs += _grid(["headlight"], ["pagmo-xnes", "pagmo-sade", "nlopt-crs2"], SEEDS, "extra")
     runs += _grid(["E"], ["spsa-fullmesh"], SEEDS, "extra")
-    runs += _grid(["point-low"], ["ours", "ours-no-energy", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS,
+    runs += _grid(["point-low"], ["ours", "ours-no-energy", "ours-no-lost-light", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS,
                   "stress")
     runs += _grid(["grazing"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS, "stress")
     runs += _grid(["E", "headlight", "point"], ["ours-tiny-kernels"], SEEDS, "stress")
     runs += _grid(["E", "point"], ["ours-no-energy"], SEEDS, "stress")
+    runs += _grid(["point"], ["ours-no-lost-light"], SEEDS, "stress")
     runs += _grid(["E", "headlight"], ["spsa-few-rays"], SEEDS, "stress")
     # Our error against time budget: final errors at B/4, B/2 (B: 10 seeds above) and 4 B.
     for scale in (0.25, 0.5, 4.0):
@@ -191,7 +240,10 @@ def quick_plan() -> list[Run]:
     seeds = SEEDS[:3]
     runs = _grid(["E", "headlight"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], seeds, "quick",
                  quick=True, save_first=True)
-    runs += _grid(["headlight"], ["ours-full-eval", "pagmo-sa"], seeds, "quick", quick=True)
+    runs += _grid(["E", "headlight"], ["ours-no-lost-light"], seeds, "quick", quick=True)
+    runs += _grid(["headlight"], ["ours-one-kernel", "ours-full-eval", "pagmo-sa"], seeds, "quick", quick=True)
+    # The full-retrace pair on E takes two minutes: only in the full plan.
+    runs += evaluation_pairs(["headlight"], seeds, "evaluation")
     return _unique(runs)
 
 
