@@ -327,18 +327,23 @@ TEST_CASE("same seed, same result; any thread count and speculation width, same 
     struct Variant {
         const char* name;
         int threads, speculative;
+        const char* evaluation;
     };
     const Variant variants[] = {
-        {"same settings again", 1, 0},
-        {"two threads, one proposal per thread", 2, 0},
-        {"two threads, eight proposals at once", 2, 8},
-        {"one thread, four proposals at once", 1, 4},
+        {"same settings again", 1, 0, "incremental"},
+        {"two threads, one proposal per thread", 2, 0, "incremental"},
+        {"two threads, eight proposals at once", 2, 8, "incremental"},
+        {"one thread, four proposals at once", 1, 4, "incremental"},
+        // Every move judged by a full retrace: slower moves, the same trajectory (the
+        // incremental objective is exact, and nothing depends on measured speed).
+        {"full-retrace evaluation", 2, 0, "full"},
     };
     for (const Variant& v : variants) {
         CAPTURE(v.name);
         DesignOptions o = c.options;
         o.threads = v.threads;
         o.speculative = v.speculative;
+        o.evaluation = v.evaluation;
         check_identical(a, run(c, o));
     }
 

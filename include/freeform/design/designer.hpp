@@ -199,8 +199,11 @@ struct Calibration {
 
 // Initial temperature such that a typical uphill move is accepted with probability p,
 // from a few trial moves (evaluated, never applied); their timing estimates the speed.
+// With `timed`, slow moves cut the trials short (a time-budgeted run must not spend its
+// budget calibrating); otherwise there are always 48, so that the temperature, and with
+// it the run, does not depend on the machine's speed or load.
 template <class Problem>
-Calibration calibrate(Problem& problem, std::uint64_t seed, double p) {
+Calibration calibrate(Problem& problem, std::uint64_t seed, double p, bool timed) {
     typename Problem::Move m;
     double sum = 0;
     int up = 0;
@@ -208,10 +211,9 @@ Calibration calibrate(Problem& problem, std::uint64_t seed, double p) {
     const auto seconds_since = [&] {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     };
-    // 48 trial moves, or fewer when moves are slow (at least 8): calibration must not eat
-    // a short stage.
+    // 48 trial moves, or (timed) fewer when moves are slow, at least 8.
     int trials = 0;
-    for (; trials < 48 && (trials < 8 || seconds_since() < 0.15); ++trials) {
+    for (; trials < 48 && (!timed || trials < 8 || seconds_since() < 0.15); ++trials) {
         CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(trials));
         problem.propose(rng, 1.0, m);
         const double d = problem.delta(m);
@@ -233,6 +235,9 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     using clock = std::chrono::steady_clock;
     const auto t_start = clock::now();
     const auto elapsed = [&] { return std::chrono::duration<double>(clock::now() - t_start).count(); };
+    // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
+    // may then depend on measured time (see calibrate()).
+    const bool timed_calibration = options.time_budget > 0 && options.max_iterations == 0;
 
     Scene planned = scene;
     planned.optimise = options;
@@ -280,7 +285,8 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 const int arms = int(all.bank.size());
                 Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
-                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), options.initial_acceptance);
+                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), options.initial_acceptance,
+                                                    timed_calibration);
                 pre.set_reference_temperature(cal.temperature);
                 AnnealOptions po;
                 po.seed = hash_combine(stage_seed, 2);
@@ -306,7 +312,8 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
-            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance);
+            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance,
+                                                                                  timed_calibration);
             const double t0 = cal.temperature;
             problem.set_reference_temperature(t0);
 
