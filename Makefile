@@ -49,19 +49,26 @@ test-sanitize: deps
 	cmake --build --preset sanitize --parallel $(JOBS)
 	ctest --preset sanitize
 
+# QUICK=1: shorter timing per micro-benchmark, results under benchmarks/results/quick/.
+BENCH_OUT = benchmarks/results$(if $(QUICK),/quick)
+BENCH_ARGS = $(if $(QUICK),--benchmark_min_time=0.1)
+
 bench: deps deps-bench build
-	@mkdir -p benchmarks/results
+	@mkdir -p $(BENCH_OUT)
 	@set -e; found=0; for exe in $(BIN)/bench_*; do \
 		[ -x "$$exe" ] || continue; found=1; \
 		name=$$(basename "$$exe"); name=$${name#bench_}; \
-		echo "== $$exe -> benchmarks/results/$$name.json"; \
-		"$$exe" --benchmark_out=benchmarks/results/$$name.json --benchmark_out_format=json; \
+		echo "== $$exe -> $(BENCH_OUT)/$$name.json"; \
+		"$$exe" $(BENCH_ARGS) --benchmark_out=$(BENCH_OUT)/$$name.json --benchmark_out_format=json; \
 	done; [ $$found = 1 ] || echo "make bench: no bench_* programs in $(BIN)"
+	$(PYTHON) benchmarks/micro/tables.py --trace $(BENCH_OUT)/trace.json --incremental $(BENCH_OUT)/incremental.json \
+		> $(BENCH_OUT)/micro.md
+	@echo "micro-benchmark tables: $(BENCH_OUT)/micro.md"
 	@if [ -f benchmarks/study/run_study.py ]; then \
 		echo "== $(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick)"; \
 		$(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick); \
 	else echo "make bench: benchmarks/study/run_study.py not found, study skipped"; fi
-	@echo "benchmark results are in benchmarks/results/"
+	@echo "benchmark results are in $(BENCH_OUT)/"
 
 clean:
 	rm -rf build

@@ -56,27 +56,6 @@ struct NotBuilt : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-json levels_json(const std::vector<StageReport>& stages) {
-    json out = json::array();
-    for (const auto& s : stages)
-        out.push_back({{"level", s.level},
-                       {"mesh", json::array({s.mesh_x, s.mesh_y})},
-                       {"resolution", json::array({s.resolution_x, s.resolution_y})},
-                       {"kernel_support", s.kernel_support},
-                       {"rays", s.rays},
-                       {"iterations", s.iterations},
-                       {"accepted", s.accepted},
-                       {"proposals_evaluated", s.proposals_evaluated},
-                       {"seconds", s.seconds},
-                       {"initial_temperature", s.initial_temperature},
-                       {"error_start", s.error_start},
-                       {"error_end", s.error_end},
-                       {"energy_end", s.energy_end},
-                       {"stop", s.stop_reason},
-                       {"bandit_weights", s.bandit_weights}});
-    return out;
-}
-
 json evaluation_json(const Evaluation& e) {
     return {{"error", e.error},     {"energy", e.energy}, {"objective", e.objective},
             {"sobel", e.sobel},     {"rays", e.rays},     {"render_seconds", e.seconds},
@@ -197,7 +176,7 @@ int run(const Args& a) {
         out["proposals_evaluated"] = proposals;
         out["accepted"] = r.accepted;
         out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
-        out["stages"] = levels_json(r.stages);
+        out["stages"] = stage_reports_json(r.stages);
         out["bandit"] = o.bandit;
         out["evaluation"] = o.evaluation;
         out["kernel_shapes"] = o.kernel_shapes;

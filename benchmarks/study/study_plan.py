@@ -123,6 +123,8 @@ METHODS = {m.name: m for m in [
     Method("ours-no-lost-light", "design", "ours with the reference's objective: no lost-light term "
            "(optimise.lost_light_weight 0; the energy threshold stays)",
            patch={"optimise": {"lost_light_weight": 0}}, family="ablation"),
+    Method("ours-error-guided", "design", "ours with error-guided kernel centres (optimise.error_guided)",
+           patch={"optimise": {"error_guided": True}}, family="ablation"),
     Method("ours-single-level", "design", "ours without the multi-level schedule",
            patch={"optimise": {"multilevel": False}}),
     Method("ours-flat", "design", "ours with flat triangles (Phong α = 0)", patch={"surface": {"phong_alpha": 0}}),
@@ -217,7 +219,8 @@ def full_plan() -> list[Run]:
     runs += _grid(PUBLIC_CASES, ["ours"] + MAIN_BASELINES, SEEDS, "main", save_first=True)
     runs += _grid(["E", "headlight"], ["sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform",
                                        "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-full-eval",
-                                       "ours-single-level", "ours-flat", "ours-no-lost-light"], SEEDS, "ablation")
+                                       "ours-single-level", "ours-flat", "ours-no-lost-light", "ours-error-guided"], SEEDS,
+                  "ablation")
     runs += evaluation_pairs(["headlight", "E"], SEEDS[:3], "evaluation")
     runs += _grid(["headlight"], ["pagmo-xnes", "pagmo-sade", "nlopt-crs2"], SEEDS, "extra")
     runs += _grid(["E"], ["spsa-fullmesh"], SEEDS, "extra")

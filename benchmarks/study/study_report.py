@@ -495,6 +495,13 @@ def _build(out_dir: Path, meta: dict, quick: bool) -> Path:
             "three seeds and budgets of a few seconds. It shows that the pipeline works end to end; its numbers are not the study's results. "
             "The committed `benchmarks/results/REPORT.md` comes from a full run (`make bench`).")
         add("")
+    reduced = [opt for opt in ("--seeds", "--purposes", "--cases", "--methods") if opt in meta.get("command", "")]
+    if not quick and reduced:
+        add(f"> **This full-mode run was reduced** ({', '.join(f'`{o}`' for o in reduced)}, see the command below): "
+            "fewer seeds or fewer parts of the plan than `make bench` runs. Stability figures (standard deviations, "
+            "failure rates) over so few seeds are indicative only; parts of the plan that were left out are "
+            "reported as not run.")
+        add("")
     load = meta.get("load_at_start")
     add(table(["", ""], [
         ["date", f"{meta.get('started', '?')} → {meta.get('finished', '?')}"],

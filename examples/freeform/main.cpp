@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include <freeform/design/designer.hpp>
+#include <freeform/design/report_json.hpp>
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>
 #include <freeform/io/target.hpp>
@@ -384,23 +385,7 @@ int run_design(const DesignArgs& a) {
     m["bandit_weights"] = result.bandit_weights;
     if (!result.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = result.preprocess_rates;
     m["kernels"] = bank;
-    json levels = json::array();
-    for (const auto& s : result.stages)
-        levels.push_back({{"level", s.level},
-                          {"mesh", json::array({s.mesh_x, s.mesh_y})},
-                          {"resolution", json::array({s.resolution_x, s.resolution_y})},
-                          {"kernel_support", s.kernel_support},
-                          {"rays", s.rays},
-                          {"iterations", s.iterations},
-                          {"accepted", s.accepted},
-                          {"seconds", s.seconds},
-                          {"initial_temperature", s.initial_temperature},
-                          {"error_start", s.error_start},
-                          {"error_end", s.error_end},
-                          {"energy_end", s.energy_end},
-                          {"stop", s.stop_reason},
-                          {"bandit_weights", s.bandit_weights}});
-    m["levels"] = levels;
+    m["levels"] = stage_reports_json(result.stages);
     m["effective_scene"] = scene_to_json(scene);
 
     std::ostringstream csv;
