@@ -63,7 +63,7 @@ CASES = {c.name: c for c in [
     Case("at", "examples/scenes/letter-at.json", 12, title="symbol @ (collimated, mirror, 101², 200²)",
          reference={"error": 0.086, "energy": 0.965, "iterations": 9.2e5, "seconds": 548}),
     Case("headlight", "examples/scenes/headlight.json", 5, 3,
-         title="headlight low beam (collimated, mirror, 13² mesh, 50² px)",
+         title="headlight low beam (collimated, mirror, 27² mesh, 50² px)",
          reference={"error": 0.096, "energy": 1.0, "iterations": 1.3e5, "seconds": 75,
                     "runs": [0.096, 0.092, 0.103, 0.089]}),
     Case("point", "examples/scenes/point-light.json", 12,

@@ -111,9 +111,11 @@ inline std::vector<int> level_kernel_supports(const std::vector<LevelPlan>& leve
 
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
-//   target: binary shapes get r/2 + 1 vertices along the longer side (r/4 + 1 below 64
-//   px, like the reference's 13² headlight for 50²), photographs 2r + 1 (the reference's
-//   401² for a 200² photo); the shorter side follows the surface's aspect ratio.
+//   target: binary shapes get r/2 + 1 vertices along the longer side (made odd: 27 for
+//   the 50² headlight, where the reference used 13²; the study, benchmarks/results/
+//   REPORT.md, found 13² twice the error of 25² at equal time), photographs 2r + 1 (the
+//   reference's 401² for a 200² photo); the shorter side follows the surface's aspect
+//   ratio.
 //   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (the
 //   reference's 50² → 200² with 25² → 101²); one level when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
@@ -122,7 +124,7 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* targ
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
         const bool photo = target && target_grey_fraction(resample_area(*target, rx, ry)) > 0.25;
-        int mesh = photo ? 2 * r + 1 : (r < 64 ? r / 4 + 1 : r / 2 + 1);
+        int mesh = photo ? 2 * r + 1 : r / 2 + 1;
         mesh = std::max(5, mesh | 1);
         const Vec2d size = scene.surface.size;
         mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
