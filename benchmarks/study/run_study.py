@@ -107,6 +107,9 @@ def config_of(cmd: list[str]) -> list[str]:
     return out
 
 
+PASS_KEYS = ("started", "finished", "commit", "dirty", "command", "wall_seconds", "runs_done", "runs_reused")
+
+
 def estimate(runs: list[plan.Run]) -> float:
     return sum(plan.expected_seconds(r) + OVERHEAD.get(r.case, DEFAULT_OVERHEAD) for r in runs)
 
@@ -169,12 +172,31 @@ def main() -> int:
         out_dir.mkdir(parents=True, exist_ok=True)
         meta = machine_info(args.threads)
         meta.update({"mode": mode, "started": dt.datetime.now().astimezone().isoformat(timespec="seconds"),
-                     "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
+                     "finished": None, "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
                      "planned_runs": len(runs), "estimated_seconds": estimate(runs)})
+        # A study is often run in several passes (resumed, more seeds): keep what each earlier pass did.
+        passes = []
+        if meta_file.exists() and not args.fresh:
+            try:
+                old = json.loads(meta_file.read_text())
+                passes = old.get("passes") or [{k: old.get(k) for k in PASS_KEYS}]
+            except (OSError, json.JSONDecodeError):
+                pass
         start = time.monotonic()
         unavailable: dict[str, str] = {}
         failed: list[dict] = []
         done = skipped = 0
+
+        def save_meta(finished: bool) -> None:
+            # Written after every run, so that a study stopped part-way still says what it did.
+            meta.update({"finished": dt.datetime.now().astimezone().isoformat(timespec="seconds") if finished
+                         else None, "wall_seconds": time.monotonic() - start, "runs_done": done,
+                         "runs_reused": skipped, "runs_failed": failed, "engines_unavailable": unavailable})
+            this = {k: meta.get(k) for k in PASS_KEYS}
+            this["finished"] = this["finished"] or dt.datetime.now().astimezone().isoformat(timespec="seconds")
+            this["interrupted"] = not finished
+            meta["passes"] = passes + [this]
+            meta_file.write_text(json.dumps(meta, indent=1) + "\n")
         for k, r in enumerate(runs):
             method = plan.METHODS[r.method]
             out_file = out_dir / "runs" / (r.key + ".json")
@@ -217,10 +239,8 @@ def main() -> int:
                             "seed": r.seed, "config": cfg}
             out_file.write_text(json.dumps(res, indent=1) + "\n")
             done += 1
-        meta.update({"finished": dt.datetime.now().astimezone().isoformat(timespec="seconds"),
-                     "wall_seconds": time.monotonic() - start, "runs_done": done, "runs_reused": skipped,
-                     "runs_failed": failed, "engines_unavailable": unavailable})
-        meta_file.write_text(json.dumps(meta, indent=1) + "\n")
+            save_meta(False)
+        save_meta(True)
         print(f"study runs finished in {fmt_duration(meta['wall_seconds'])}: {done} run, {skipped} reused, "
               f"{len(failed)} failed", flush=True)
 
