@@ -3,7 +3,6 @@
 // results do not depend on the policy.
 #include <doctest/doctest.h>
 
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -11,6 +10,7 @@
 #include <freeform/core/exec.hpp>
 #include <freeform/core/hd.hpp>
 #include <freeform/cuda.hpp>  // a no-op for a host compiler
+#include <freeform/cuda/kernels.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
 
 #include "support.hpp"
@@ -22,40 +22,6 @@ namespace {
 
 static_assert(!FREEFORM_HAS_CUDA_POLICY, "a host compiler sees no CUDA policy");
 static_assert(!FREEFORM_DEVICE_COMPILE);
-
-// The shape of every hot kernel: plain views in, one index per call, no allocation.
-struct TraceRecords {
-    HeightfieldView hf;
-    PathParams pp;
-    const Vec3* origin;
-    const Vec3* direction;
-    RayRecord* out;
-
-    FREEFORM_HD void operator()(std::int64_t k) const {
-        out[k] = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
-    }
-};
-
-// Trace and deposit in one functor, with the atomics of the GPU version (on the host:
-// std::atomic_ref). Signed fixed-point amounts are added as unsigned 64-bit integers.
-struct TraceDeposit {
-    HeightfieldView hf;
-    PathParams pp;
-    const Vec3* origin;
-    const Vec3* direction;
-    const Fixed* weight;
-    unsigned long long* cells;
-
-    FREEFORM_HD void operator()(std::int64_t k) const {
-        const RayRecord rec = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
-        if (rec.status != RayStatus::receiver) return;
-        unsigned long long* c = cells;
-        deposit(pp.receiver, rec.px, rec.py, weight[k], [c](std::int64_t i, Fixed a) {
-            std::atomic_ref<unsigned long long>(c[i]).fetch_add(static_cast<unsigned long long>(a),
-                                                                std::memory_order_relaxed);
-        });
-    }
-};
 
 struct WavyScene {
     Scene scene;
@@ -107,29 +73,36 @@ TEST_CASE("for_each_chunk splits [0, n) into contiguous ranges fixed by n and ch
     }
 }
 
-TEST_CASE("a FREEFORM_HD trace functor gives the same records under exec::seq and exec::omp") {
+TEST_CASE("the GPU tracer's record kernel gives HeightfieldTracer's records under exec::seq and exec::omp") {
     const WavyScene w = wavy_scene(Deposit::bilinear);
     const PathParams pp = make_path_params(w.scene);
     const auto n = std::size_t(w.rays.size());
-    std::vector<RayRecord> seq(n), omp(n), tracer(n);
-    for_each(exec::seq, w.rays.size(),
-             TraceRecords{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(), seq.data()});
-    for_each(exec::omp_t{2}, w.rays.size(),
-             TraceRecords{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(), omp.data()});
+    // Every other ray, backwards: the kernel follows the ids it is given.
+    std::vector<std::int32_t> ids;
+    for (std::size_t k = n; k-- > 0;)
+        if (k % 2 == 0) ids.push_back(std::int32_t(k));
+    std::vector<RayRecord> seq(ids.size()), omp(ids.size()), tracer(ids.size());
+    const auto kernel = [&](RayRecord* out) {
+        return cuda::TraceRecordsKernel<HeightfieldView>{w.surface.view(), pp, w.rays.origin.data(),
+                                                         w.rays.direction.data(), ids.data(), out};
+    };
+    for_each(exec::seq, std::int64_t(ids.size()), kernel(seq.data()));
+    for_each(exec::omp_t{2}, std::int64_t(ids.size()), kernel(omp.data()));
     CHECK(seq == omp);
-
-    // The same kernel is what HeightfieldTracer runs: its records and its histogram agree.
-    std::vector<std::int32_t> ids(n);
-    for (std::size_t k = 0; k < n; ++k) ids[k] = std::int32_t(k);
     const HeightfieldTracer t(w.surface, w.rays, pp);
     t.trace(exec::seq, ids, tracer);
     CHECK(seq == tracer);
 
+    // Records deposited one by one give trace_all's histogram and totals.
+    std::vector<std::int32_t> all(n);
+    std::vector<RayRecord> records(n);
+    for (std::size_t k = 0; k < n; ++k) all[k] = std::int32_t(k);
+    t.trace(exec::omp_t{2}, all, records);
     Histogram from_records(w.scene.receiver.width, w.scene.receiver.height);
     TraceTotals totals_from_records;
     for (std::size_t k = 0; k < n; ++k) {
-        totals_from_records.add(seq[k].status, w.rays.weight[k]);
-        deposit_record(pp.receiver, seq[k], w.rays.weight[k], from_records.cells);
+        totals_from_records.add(records[k].status, w.rays.weight[k]);
+        deposit_record(pp.receiver, records[k], w.rays.weight[k], from_records.cells);
     }
     const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::seq);
     CHECK(from_records == full.histogram);
@@ -138,23 +111,30 @@ TEST_CASE("a FREEFORM_HD trace functor gives the same records under exec::seq an
     CHECK(full.totals.rays_hit_receiver > 1000);  // the scene does reach the receiver
 }
 
-TEST_CASE("trace-and-deposit with atomics equals HeightfieldTracer::trace_all, serial and parallel") {
+TEST_CASE("the GPU tracer's trace-and-deposit kernel equals HeightfieldTracer::trace_all, serial and parallel") {
     for (const Deposit d : {Deposit::nearest, Deposit::bilinear}) {
         const WavyScene w = wavy_scene(d);
         const PathParams pp = make_path_params(w.scene);
         const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::omp);
         const std::size_t cells = full.histogram.cells.size();
-        std::vector<unsigned long long> seq(cells, 0), omp(cells, 0);
-        const auto functor = [&](unsigned long long* out) {
-            return TraceDeposit{w.surface.view(), pp, w.rays.origin.data(), w.rays.direction.data(),
-                                w.rays.weight.data(), out};
+        const std::size_t lanes = std::size_t(cuda::totals_lanes) * cuda::totals_slots;
+        std::vector<unsigned long long> seq(cells, 0), omp(cells, 0), seq_totals(lanes, 0), omp_totals(lanes, 0);
+        const auto kernel = [&](unsigned long long* out, unsigned long long* totals) {
+            return cuda::TraceDepositKernel<HeightfieldView>{w.surface.view(),       pp, w.rays.origin.data(),
+                                                             w.rays.direction.data(), w.rays.weight.data(), out,
+                                                             totals};
         };
-        for_each(exec::seq, w.rays.size(), functor(seq.data()));
-        for_each(exec::omp_t{2}, w.rays.size(), functor(omp.data()));
+        for_each(exec::seq, w.rays.size(), kernel(seq.data(), seq_totals.data()));
+        for_each(exec::omp_t{2}, w.rays.size(), kernel(omp.data(), omp_totals.data()));
         CHECK(seq == omp);
+        CHECK(seq_totals == omp_totals);
         Histogram h(w.scene.receiver.width, w.scene.receiver.height);
         for (std::size_t k = 0; k < cells; ++k) h.cells[k] = Fixed(seq[k]);
         CHECK(h == full.histogram);
+        const TraceTotals t = cuda::fold_totals(seq_totals, w.rays.size());
+        CHECK(t.weight_by_status == full.totals.weight_by_status);
+        CHECK(t.rays_hit_receiver == full.totals.rays_hit_receiver);
+        CHECK(t.rays == full.totals.rays);
     }
 }
 

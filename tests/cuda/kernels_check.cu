@@ -11,6 +11,7 @@
 #include <freeform/core/math.hpp>
 #include <freeform/core/rng.hpp>
 #include <freeform/core/view.hpp>
+#include <freeform/cuda/kernels.hpp>
 #include <freeform/surface/heightmap.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
 #include <freeform/trace/path.hpp>
