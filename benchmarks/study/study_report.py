@@ -495,16 +495,20 @@ def _build(out_dir: Path, meta: dict, quick: bool) -> Path:
             "three seeds and budgets of a few seconds. It shows that the pipeline works end to end; its numbers are not the study's results. "
             "The committed `benchmarks/results/REPORT.md` comes from a full run (`make bench`).")
         add("")
-    reduced = [opt for opt in ("--seeds", "--purposes", "--cases", "--methods") if opt in meta.get("command", "")]
-    if not quick and reduced:
-        add(f"> **This full-mode run was reduced** ({', '.join(f'`{o}`' for o in reduced)}, see the command below): "
-            "fewer seeds or fewer parts of the plan than `make bench` runs. Stability figures (standard deviations, "
-            "failure rates) over so few seeds are indicative only; parts of the plan that were left out are "
-            "reported as not run.")
-        add("")
+    passes = meta.get("passes") or []
+    if not quick:
+        on_disk = {(r["case"], r["method"], r["budget"], r["seed"]) for r in st.runs}
+        missing = [r for r in plan.full_plan() if (r.case, r.method, r.budget, r.seed) not in on_disk]
+        if missing:
+            seeds_done = len({r["seed"] for r in st.runs})
+            add(f"> **This full-mode study is incomplete**: {len(missing)} of the {len(plan.full_plan())} runs that "
+                f"`make bench` plans are not on disk (first missing: `{missing[0].key}`; {seeds_done} seeds seen). "
+                "Statistics cover the runs that exist; parts of the plan with no runs are reported as not run.")
+            add("")
     load = meta.get("load_at_start")
+    first_start = (passes[0].get("started") if passes else None) or meta.get("started", "?")
     add(table(["", ""], [
-        ["date", f"{meta.get('started', '?')} → {meta.get('finished', '?')}"],
+        ["date", f"{first_start} → {meta.get('finished') or 'stopped part-way'}"],
         ["machine", f"{meta.get('cpu')}, {meta.get('cores')} cores, {meta.get('memory_gb')} GB, {meta.get('os')}"],
         ["load average at start", ", ".join(f"{x:.2f}" for x in load) if load else "–"],
         ["commit", f"`{meta.get('commit')}`" + (" (with uncommitted changes)" if meta.get("dirty") else "")],
@@ -513,7 +517,15 @@ def _build(out_dir: Path, meta: dict, quick: bool) -> Path:
                  f"reused), {len(meta.get('runs_failed', []))} failed"],
         ["study wall time", f"{total / 60:.1f} min" if total else "–"],
         ["command", f"`{meta.get('command', '')}`"],
-    ]))
+    ] + [[f"pass {i + 1}" if len(passes) > 1 else "pass",
+          f"{p.get('finished') or '?'}: {p.get('runs_done') or 0} runs"
+          + (f" in {p['wall_seconds'] / 60:.0f} min" if p.get("wall_seconds") else "")
+          + f", commit `{(p.get('commit') or '?')[:10]}`" + (" (stopped part-way)" if p.get("interrupted") else "")
+          + f", `{p.get('command', '')}`"] for i, p in enumerate(passes)]))
+    if len(passes) > 1:
+        add("")
+        add("The study was run in passes (each resumes from the runs on disk and adds what is missing); "
+            "the header's commit, load and wall time are those of the last pass.")
     add("")
     pairs = evaluation_pairs(st)
     if pairs:
