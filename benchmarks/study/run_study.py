@@ -236,7 +236,8 @@ def main() -> int:
             print("  " + p.stdout.strip().splitlines()[-1], flush=True)
             res = json.loads(out_file.read_text())
             res["study"] = {"case": r.case, "method": r.method, "purpose": r.purpose, "budget": r.budget,
-                            "seed": r.seed, "config": cfg}
+                            "seed": r.seed, "config": cfg, "pass": len(passes) + 1,
+                            "finished": dt.datetime.now().astimezone().isoformat(timespec="seconds")}
             out_file.write_text(json.dumps(res, indent=1) + "\n")
             done += 1
             save_meta(False)

@@ -813,6 +813,14 @@ WHY = {
     "ours-single-level": "the whole budget is spent on the final mesh and resolution, where moves cost most",
     "ours-flat": "flat triangles make the irradiance blocky at the mesh's resolution",
     "ours-one-kernel": "one shape cannot follow features of other orientations",
+    "ours": "where ours fails it is on energy, not error: the flat starting mirror sends much of the light past "
+            "the receiver, and gathering it needs a curvature of the whole surface that local kernel moves, "
+            "each judged on its own, build slowly; the energy rises level by level (first level → end below) "
+            "but not to 0.9 within the budget",
+    "ours-mesh2x": "the larger mesh costs more per move and needs more moves: fewer, smaller steps in the same "
+                   "budget (see 'No more than a scene needs')",
+    "ours-rays4x": "four times the rays make every move four times as costly: a quarter of the moves in the same "
+                   "budget (see 'No more than a scene needs')",
 }
 
 
@@ -829,11 +837,15 @@ def failure_section(st: Study) -> str:
             if s["fail_error"]:
                 parts.append(f"{s['fail_error']}/{s['n']} seeds above the error threshold {f3(thr)} "
                              f"(median {f3(s['median'])}, worst {f3(s['worst'])})")
-            if s["fail_energy"]:
-                parts.append(f"{s['fail_energy']}/{s['n']} seeds with energy < {FAIL_ENERGY} "
-                             f"(median {f3(s['energy_median'])}, lowest {f3(s['energy_min'])})")
-            extra = ""
             runs = st.main(c, m)
+            if s["fail_energy"]:
+                first = [r["raw"]["stages"][0]["energy_end"] for r in runs
+                         if r["raw"].get("stages") and "energy_end" in r["raw"]["stages"][0]]
+                path = f"; energy {f3(statistics.median(first))} after the first level → " if first else "; "
+                parts.append(f"{s['fail_energy']}/{s['n']} seeds with energy < {FAIL_ENERGY} "
+                             f"(median {f3(s['energy_median'])}, lowest {f3(s['energy_min'])}"
+                             + (f"{path}{f3(s['energy_median'])} at the end)" if first else ")"))
+            extra = ""
             raw = runs[0]["raw"] if runs else {}
             d = raw.get("model", {}).get("dimension")
             if d:
