@@ -65,6 +65,7 @@ def load_runs(out_dir: Path) -> list[dict]:
             "seconds": r["seconds"], "iterations": r["iterations"], "evaluations": r["evaluations"],
             "ips": r["iterations_per_second"], "eps": r.get("evaluations_per_second", r["iterations_per_second"]),
             "trace": rows, "levels": r["trace"]["levels"], "threads": r["threads"], "raw": r,
+            "pass": s.get("pass"),  # None: written before runs recorded their pass
         })
     return runs
 
@@ -526,6 +527,10 @@ def _build(out_dir: Path, meta: dict, quick: bool) -> Path:
         add("")
         add("The study was run in passes (each resumes from the runs on disk and adds what is missing); "
             "the header's commit, load and wall time are those of the last pass.")
+    drift = drift_section(st)
+    if drift:
+        add("")
+        add(drift)
     add("")
     pairs = evaluation_pairs(st)
     if pairs:
@@ -775,6 +780,43 @@ def speed_section(st: Study) -> str:
         out.append(table(["case", "height field", "Embree", "Embree / height field", "largest |error difference|"],
                          rows))
     return "\n".join(out) if out else "No speed comparisons in this run."
+
+
+def drift_section(st: Study) -> str:
+    """How fast the machine was in each pass: a (case, method) group's evaluations/s in a later pass against
+    the same group in the earlier ones. On a shared host the speed drifts between passes, and a time-budgeted
+    study measures that drift along with the methods."""
+    later = sorted({r["pass"] for r in st.runs if r["pass"] is not None})
+    if not later or not any(r["pass"] is None for r in st.runs):
+        return ""
+    out = ["Machine speed by pass (a group's median evaluations/s in the pass against the same (case, method, "
+           "budget) in the runs written before runs recorded their pass, i.e. passes 1–2; the same code):", ""]
+    rows = []
+    for p in later:
+        ratios = []
+        for runs in st.groups.values():
+            base = [r["eps"] for r in runs if r["pass"] is None]
+            now = [r["eps"] for r in runs if r["pass"] == p]
+            if base and now:
+                ratios.append(med(now) / med(base))
+        if ratios:
+            q = np.percentile(ratios, [10, 90])
+            rows.append([str(p), str(len(ratios)), f"{med(ratios):.2f}×", f"{q[0]:.2f}× – {q[1]:.2f}×"])
+    out.append(table(["pass", "groups", "median speed ratio", "10th – 90th percentile"], rows))
+    ours = []
+    for c in st.cases:
+        runs = st.main(c, "ours")
+        base, now = [r for r in runs if r["pass"] is None], [r for r in runs if r["pass"] is not None]
+        if base and now:
+            ours.append([c, f"{len(base)} / {len(now)}", f3(med([r["error"] for r in base])),
+                         f3(med([r["error"] for r in now])), fnum(med([r["ips"] for r in base])),
+                         fnum(med([r["ips"] for r in now]))])
+    if ours:
+        out += ["", "Ours at the case's budget, earlier passes against later ones (seeds 101–103 against 104–110 "
+                "where the study was resumed with more seeds): a slower machine gives fewer iterations in the "
+                "same budget, hence a higher error; the spread over seeds below includes this.", "",
+                table(["case", "runs", "median error, earlier", "later", "iterations/s, earlier", "later"], ours)]
+    return "\n".join(out)
 
 
 WHY = {
