@@ -3,6 +3,8 @@
 #   make test           release build + all tests
 #   make test-sanitize  AddressSanitizer/UBSan build + tests
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
+#                         (the full study reuses the runs in benchmarks/results/runs, the committed
+#                         ones included; STUDY_ARGS=--fresh measures every run again)
 JOBS ?= $(shell nproc)
 BUILD := build/release
 BIN := $(BUILD)/bin
@@ -52,6 +54,8 @@ test-sanitize: deps
 # QUICK=1: shorter timing per micro-benchmark, results under benchmarks/results/quick/.
 BENCH_OUT = benchmarks/results$(if $(QUICK),/quick)
 BENCH_ARGS = $(if $(QUICK),--benchmark_min_time=0.1)
+# Options for run_study.py, e.g. STUDY_ARGS="--fresh" or STUDY_ARGS="--seeds 3 --cases E,headlight".
+STUDY_ARGS ?=
 
 bench: deps deps-bench build
 	@mkdir -p $(BENCH_OUT)
@@ -65,8 +69,8 @@ bench: deps deps-bench build
 		> $(BENCH_OUT)/micro.md
 	@echo "micro-benchmark tables: $(BENCH_OUT)/micro.md"
 	@if [ -f benchmarks/study/run_study.py ]; then \
-		echo "== $(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick)"; \
-		$(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick); \
+		echo "== $(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick) $(STUDY_ARGS)"; \
+		$(PYTHON) benchmarks/study/run_study.py $(if $(QUICK),--quick) $(STUDY_ARGS); \
 	else echo "make bench: benchmarks/study/run_study.py not found, study skipped"; fi
 	@echo "benchmark results are in $(BENCH_OUT)/"
 
