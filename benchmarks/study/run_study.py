@@ -63,7 +63,8 @@ def machine_info(threads: int) -> dict:
             return ""
 
     commit = git("rev-parse", "HEAD")
-    dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    # The study's own results are tracked and rewritten while it runs: they do not make the code dirty.
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!benchmarks/results"))
     load = None
     try:
         load = os.getloadavg()
@@ -189,12 +190,11 @@ def main() -> int:
 
         def save_meta(finished: bool) -> None:
             # Written after every run, so that a study stopped part-way still says what it did.
-            meta.update({"finished": dt.datetime.now().astimezone().isoformat(timespec="seconds") if finished
-                         else None, "wall_seconds": time.monotonic() - start, "runs_done": done,
-                         "runs_reused": skipped, "runs_failed": failed, "engines_unavailable": unavailable})
-            this = {k: meta.get(k) for k in PASS_KEYS}
-            this["finished"] = this["finished"] or dt.datetime.now().astimezone().isoformat(timespec="seconds")
-            this["interrupted"] = not finished
+            now = dt.datetime.now().astimezone().isoformat(timespec="seconds")
+            meta.update({"finished": now if finished else None, "wall_seconds": time.monotonic() - start,
+                         "runs_done": done, "runs_reused": skipped, "runs_failed": failed,
+                         "engines_unavailable": unavailable})
+            this = {k: meta.get(k) for k in PASS_KEYS} | {"finished": now, "interrupted": not finished}
             meta["passes"] = passes + [this]
             meta_file.write_text(json.dumps(meta, indent=1) + "\n")
         for k, r in enumerate(runs):

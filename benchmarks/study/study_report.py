@@ -881,12 +881,10 @@ def failure_section(st: Study) -> str:
                              f"(median {f3(s['median'])}, worst {f3(s['worst'])})")
             runs = st.main(c, m)
             if s["fail_energy"]:
-                first = [r["raw"]["stages"][0]["energy_end"] for r in runs
-                         if r["raw"].get("stages") and "energy_end" in r["raw"]["stages"][0]]
-                path = f"; energy {f3(statistics.median(first))} after the first level → " if first else "; "
+                first = med([r["raw"]["stages"][0].get("energy_end") for r in runs if r["raw"].get("stages")])
+                path = "" if math.isnan(first) else f"; {f3(first)} after the first level"
                 parts.append(f"{s['fail_energy']}/{s['n']} seeds with energy < {FAIL_ENERGY} "
-                             f"(median {f3(s['energy_median'])}, lowest {f3(s['energy_min'])}"
-                             + (f"{path}{f3(s['energy_median'])} at the end)" if first else ")"))
+                             f"(median {f3(s['energy_median'])}, lowest {f3(s['energy_min'])}{path})")
             extra = ""
             raw = runs[0]["raw"] if runs else {}
             d = raw.get("model", {}).get("dimension")
