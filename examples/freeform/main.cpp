@@ -308,6 +308,7 @@ struct DesignArgs {
     std::optional<double> time_budget;
     std::optional<int> threads;
     bool quiet = false;
+    bool start_only = false;
 };
 
 int run_design(const DesignArgs& a) {
@@ -336,14 +337,27 @@ int run_design(const DesignArgs& a) {
                     (unsigned long long)options.seed);
     DesignOptions run_options = options;
     run_options.progress_every = 500;
-    DesignResult result = design(scene, std::move(initial), target, run_options, [&](const DesignProgress& p) {
-        status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
-                    std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
-                    fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
-                    fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) + " it/s | " +
-                    fixed(p.time_left, 1) + " s left");
-        return interrupted.load();
-    });
+    DesignResult result;
+    if (a.start_only) {
+        // The start alone (the transport surface, or whatever the scene starts from).
+        const auto t0 = std::chrono::steady_clock::now();
+        DesignStart start = make_design_start(scene, std::move(initial), target, options.seed,
+                                              thread_count(exec::omp_t{options.threads}));
+        result.start = start.report;
+        result.start.plan = "--start-only: no annealing";
+        result.surface = std::move(start.surface);
+        result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    } else {
+        if (!a.quiet) status.show("finding the start (" + requested_start(scene) + ")");
+        result = design(scene, std::move(initial), target, run_options, [&](const DesignProgress& p) {
+            status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
+                        std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
+                        fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
+                        fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
+                        " it/s | " + fixed(p.time_left, 1) + " s left");
+            return interrupted.load();
+        });
+    }
     status.finish();
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
@@ -386,6 +400,7 @@ int run_design(const DesignArgs& a) {
     if (!result.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = result.preprocess_rates;
     m["kernels"] = bank;
     m["levels"] = stage_reports_json(result.stages);
+    m["start"] = start_report_json(result.start);
     m["effective_scene"] = scene_to_json(scene);
 
     std::ostringstream csv;
@@ -420,6 +435,14 @@ int run_design(const DesignArgs& a) {
                     result.stopped_early ? "interrupted" : "done", error, totals.energy(),
                     (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                     result.stopped_early ? " -- best result so far written" : "");
+        const StartReport& st = result.start;
+        std::printf("  start: %s%s%s", st.used.c_str(),
+                    st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
+                    st.fallback_reason.empty() ? "" : (" (transport not used: " + st.fallback_reason + ")").c_str());
+        if (st.requested == "transport" && st.transport.height_excess > 0)
+            std::printf(", its heights exceed surface.height_bounds by %.2f mm (clamped)", st.transport.height_excess * 1e3);
+        if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
+        std::printf("\n");
         std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
                     a.out.string().c_str());
     }
@@ -459,6 +482,8 @@ int main(int argc, char** argv) {
     design_cmd->add_option("--time-budget", da.time_budget, "seconds (default: the scene's optimise.time_budget)");
     design_cmd->add_option("--threads", da.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
+    design_cmd->add_flag("--start-only", da.start_only,
+                         "write the start surface alone (the transport surface by default), without annealing");
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");
 

@@ -27,6 +27,7 @@
 #include "../surface/refine.hpp"
 #include "../trace/setup.hpp"
 #include "problem.hpp"
+#include "start.hpp"
 
 namespace freeform {
 
@@ -64,6 +65,7 @@ struct ConvergencePoint {
 };
 
 struct DesignResult {
+    StartReport start;         // where the design started, and what the schedule made of it
     Heightmap surface;         // final design (final mesh)
     Histogram irradiance;      // at the final level's resolution
     Target target;             // the final level's target
@@ -109,6 +111,14 @@ inline std::vector<int> level_kernel_supports(const std::vector<LevelPlan>& leve
     return out;
 }
 
+// Time shares of a schedule of n levels (15 / 30 / 55 % for three).
+inline void assign_time_shares(std::vector<LevelPlan>& levels) {
+    static const double shares[3][3] = {{1, 0, 0}, {0.35, 0.65, 0}, {0.15, 0.3, 0.55}};
+    const std::size_t n = std::min<std::size_t>(levels.size(), 3);
+    for (std::size_t k = 0; k < levels.size(); ++k)
+        levels[k].time_share = n == 0 ? 1.0 : shares[n - 1][std::min(k, n - 1)];
+}
+
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
 //   target: binary shapes get r/2 + 1 vertices along the longer side (made odd: 27 for
@@ -143,12 +153,20 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* targ
         mx = coarser(mx), my = coarser(my), x /= 2, y /= 2;
     }
     for (std::size_t k = 0; k < levels.size(); ++k) levels[k].kernel_supports = level_kernel_supports(levels, k);
-    static const double shares[3][3] = {{1, 0, 0}, {0.35, 0.65, 0}, {0.15, 0.3, 0.55}};
-    for (std::size_t k = 0; k < levels.size(); ++k) {
-        levels[k].time_share = shares[levels.size() - 1][k];
-        levels[k].iterations = std::int64_t(40) * levels[k].mesh_x * levels[k].mesh_y;
-    }
+    assign_time_shares(levels);
+    for (auto& l : levels) l.iterations = std::int64_t(40) * l.mesh_x * l.mesh_y;
     return levels;
+}
+
+// How many of the planned coarse levels a design starting at error `start_error` (the
+// exact tracer's, at the final level) skips. Coarse levels move light across the
+// receiver at low cost; a start that already has the light roughly in place only needs
+// the finer ones, which keeps its detail instead of re-shaping it on a coarse mesh.
+inline int coarse_levels_to_skip(double start_error, int planned) {
+    if (planned <= 1 || !(start_error >= 0)) return 0;
+    if (start_error <= 0.2) return planned - 1;
+    if (start_error <= 0.35) return std::max(0, planned - 2);
+    return 0;
 }
 
 // The penalty terms the options ask for; add terms of your own to it and pass it to
@@ -244,14 +262,55 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     Scene planned = scene;
     planned.optimise = options;
     std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned, &target_image) : options.levels;
+    const int threads = thread_count(exec::omp_t{options.threads});
+    DesignResult result;
+
+    // Where to start (the transport start is solved and judged here), and which of the
+    // planned levels that start still needs.
+    DesignStart start = make_design_start(scene, std::move(initial), target_image, options.seed, threads);
+    result.start = start.report;
+    const int planned_count = int(levels.size());
+    int skip = 0;
+    if (options.start_level >= 0) {
+        skip = std::min(options.start_level, planned_count - 1);
+        result.start.plan = "optimise.start_level = " + std::to_string(options.start_level);
+    } else if (start.map && options.levels.empty()) {
+        skip = coarse_levels_to_skip(start.report.error, planned_count);
+        result.start.plan = "start error " + std::to_string(start.report.error) + ": " +
+                            (skip == 0 ? std::string("all planned levels run")
+                                       : "the " + std::to_string(skip) + " coarsest of " +
+                                             std::to_string(planned_count) + " planned levels skipped");
+    } else {
+        result.start.plan = "all planned levels run";
+    }
+    if (skip > 0) {
+        // The schedule goes on as planned from the first level kept (its kernels too:
+        // the large ones of the coarse levels would only re-shape what the start has).
+        levels.erase(levels.begin(), levels.begin() + skip);
+        assign_time_shares(levels);
+    }
     for (std::size_t k = 0; k < levels.size(); ++k)
         if (levels[k].kernel_supports.empty())
             levels[k].kernel_supports = level_kernel_supports(levels, k);
-    const int threads = thread_count(exec::omp_t{options.threads});
-    DesignResult result;
+    result.start.levels_planned = planned_count;
+    result.start.levels_used = int(levels.size());
+    // From a transport start the annealer refines: moves shift light by at most
+    // refine_max_shift_cells and start colder (refine_initial_acceptance), so that its
+    // first, hottest iterations do not undo the layout the start already has.
+    DesignOptions moves = options;
+    if (start.map) {
+        moves.max_shift_cells = std::min(options.max_shift_cells, options.refine_max_shift_cells);
+        moves.min_shift_cells = std::min(options.min_shift_cells, moves.max_shift_cells);
+        moves.initial_acceptance = std::min(options.initial_acceptance, options.refine_initial_acceptance);
+    }
+    Heightmap surface = std::move(start.surface);
+    // A transport start is fitted again on the first level's own mesh (not resampled).
+    if (start.map && (levels.front().mesh_x != surface.nx() || levels.front().mesh_y != surface.ny())) {
+        TransportReport fit = start.report.transport;
+        surface = surface_from_transport(scene, *start.map, levels.front().mesh_x, levels.front().mesh_y, fit);
+    }
     std::int64_t total_iterations = 0;
     double share_used = 0;
-    Heightmap surface = std::move(initial);
     bool stop = false;
     std::vector<int> kept_arms;  // after the history bandit's pre-process
 
@@ -283,11 +342,11 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
                 options.kernel_shapes != "isotropic" &&
                 options.preprocess_iterations > 0 && options.preprocess_keep > 0) {
-                ProposalSettings all = design_detail::proposals_for(options, support);
+                ProposalSettings all = design_detail::proposals_for(moves, support);
                 const int arms = int(all.bank.size());
                 Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
-                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), options.initial_acceptance,
+                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), moves.initial_acceptance,
                                                     timed_calibration);
                 pre.set_reference_temperature(cal.temperature);
                 AnnealOptions po;
@@ -309,12 +368,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 std::sort(kept_arms.begin(), kept_arms.end());
                 result.preprocess_rates = rate;
             }
-            ProposalSettings ps = design_detail::proposals_for(options, support, kept_arms);
+            ProposalSettings ps = design_detail::proposals_for(moves, support, kept_arms);
             const int arms = std::max<int>(1, int(ps.bank.size()));
             Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
-            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, options.initial_acceptance,
+            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
                                                                                   timed_calibration);
             const double t0 = cal.temperature;
             problem.set_reference_temperature(t0);

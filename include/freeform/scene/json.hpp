@@ -376,10 +376,14 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
     if (const json* v = o.find("initial")) {
         const std::string p = o.at("initial");
         const char* expected =
-            "expected \"flat\", the path of a .pfm heightmap or {\"paraboloid\": {\"focal_length\": f}}";
+            "expected \"transport\", \"flat\", the path of a .pfm heightmap or {\"paraboloid\": {\"focal_length\": f}}";
         if (v->is_string()) {
             const std::string str = v->get<std::string>();
-            if (str != "flat") {
+            if (str == "flat") {
+                s.initial_shape = InitialShape::flat;
+            } else if (str == "transport") {
+                s.initial_shape = InitialShape::transport;
+            } else {
                 std::string ext = std::filesystem::path(str).extension().string();
                 std::transform(ext.begin(), ext.end(), ext.begin(),
                                [](unsigned char c) { return char(std::tolower(c)); });
@@ -656,6 +660,28 @@ inline std::span<const OptimiseKey> optimise_keys() {
          }},
         {"multilevel", [](const json& v, const std::string& p, OptimiseSpec& o) { o.multilevel = boolean(v, p); },
          [](const OptimiseSpec& o, json& j) { j["multilevel"] = o.multilevel; }},
+        {"start_level",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             if (v.is_string() && v.get<std::string>() == "auto")
+                 o.start_level = -1;
+             else if (v.is_number_integer())
+                 o.start_level = int(integer(v, p, 0, 16));
+             else
+                 throw error(p, "expected \"auto\" or the index of the first planned level to run (0 = the coarsest), got " +
+                                    describe(v));
+         },
+         [](const OptimiseSpec& o, json& j) {
+             if (o.start_level < 0)
+                 j["start_level"] = "auto";
+             else
+                 j["start_level"] = o.start_level;
+         }},
+        {"refine_initial_acceptance",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.refine_initial_acceptance = number_in(v, p, 1e-6, 0.999); },
+         [](const OptimiseSpec& o, json& j) { j["refine_initial_acceptance"] = o.refine_initial_acceptance; }},
+        {"refine_max_shift_cells",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.refine_max_shift_cells = number_in(v, p, 0.01, 100); },
+         [](const OptimiseSpec& o, json& j) { j["refine_max_shift_cells"] = o.refine_max_shift_cells; }},
         {"coarse_rays_per_cell",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.coarse_rays_per_cell = number_in(v, p, 0, 1 << 20); },
          [](const OptimiseSpec& o, json& j) { j["coarse_rays_per_cell"] = o.coarse_rays_per_cell; }},
@@ -857,7 +883,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     else if (sf.initial_paraboloid)
         surface["initial"] = json{{"paraboloid", {{"focal_length", sf.initial_paraboloid->focal_length}}}};
     else
-        surface["initial"] = "flat";
+        surface["initial"] = starts_from_transport(s) ? "transport" : "flat";
     out["surface"] = surface;
 
     const Receiver& r = s.receiver;

@@ -19,6 +19,10 @@ struct InitialParaboloid {
     double focal_length = 0.5;  // metres; h = r^2 / (4 f), lowest point at the centre
 };
 
+// Where the design starts when no heightmap or paraboloid is given: "auto" is the
+// transport start for a scene with a target (flat otherwise).
+enum class InitialShape { automatic, flat, transport };
+
 struct SurfaceSpec {
     Frame frame{};
     Vec2d size{0.1, 0.1};
@@ -27,7 +31,8 @@ struct SurfaceSpec {
     Aperture aperture = Aperture::rect;
     Material material = Mirror{};
     double phong_alpha = 0.75;  // Phong tessellation shape factor; 0 = flat triangles
-    // Initial shape: flat (empty path and no paraboloid), a PFM heightmap, or a paraboloid.
+    // Initial shape: a PFM heightmap, a paraboloid, or else `initial_shape`.
+    InitialShape initial_shape = InitialShape::automatic;
     std::filesystem::path initial_pfm;
     std::optional<InitialParaboloid> initial_paraboloid;
 };
@@ -72,6 +77,7 @@ struct OptimiseSpec {
     int speculative = 0;              // proposals evaluated at once; 0: one per thread
     std::vector<LevelPlan> levels;    // empty: planned from the case
     bool multilevel = true;           // false: only the final level
+    int start_level = -1;             // first planned level to run; -1: decided from the start's error
     double coarse_rays_per_cell = 4;  // rays per receiver cell on levels before the last; 0: the light's
 
     // Objective.
@@ -97,6 +103,8 @@ struct OptimiseSpec {
 
     // Annealing schedule.
     double initial_acceptance = 0.03;  // of uphill moves at the start of each stage
+    double refine_initial_acceptance = 0.001;  // ... at most, after a transport start
+    double refine_max_shift_cells = 1.0;       // largest light shift of a move after a transport start
     double cooling = 0.95;
     int temperature_steps = 120;      // cooling steps per stage
     double reheat_factor = 0.5;
@@ -107,6 +115,9 @@ struct OptimiseSpec {
     int export_subdivisions = 4;      // Phong tessellation level of the exported mesh
     std::int64_t progress_every = 2000;
 };
+
+struct Scene;
+inline bool starts_from_transport(const Scene& scene);
 
 struct Scene {
     Light light{};
@@ -120,5 +131,18 @@ struct Scene {
     std::string name;                // free text for reports (scene key "name")
     std::string description;         // free text (scene key "description")
 };
+
+}  // namespace freeform
+
+namespace freeform {
+
+// True when the design starts from the transport surface (transport/start.hpp): the
+// scene asks for it, or leaves "initial" out and has a target.
+inline bool starts_from_transport(const Scene& scene) {
+    const SurfaceSpec& s = scene.surface;
+    if (!s.initial_pfm.empty() || s.initial_paraboloid) return false;
+    return s.initial_shape == InitialShape::transport ||
+           (s.initial_shape == InitialShape::automatic && scene.target.has_value());
+}
 
 }  // namespace freeform

@@ -1,0 +1,119 @@
+#pragma once
+// Where a design starts: the caller's surface (flat, a heightmap, a paraboloid) or the
+// transport surface (transport/start.hpp), judged by the exact tracer. The designer uses
+// the measured error to decide how much coarse work the schedule still needs.
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "../core/exec.hpp"
+#include "../objective/target.hpp"
+#include "../scene/rays.hpp"
+#include "../scene/scene.hpp"
+#include "../trace/heightfield.hpp"
+#include "../trace/setup.hpp"
+#include "../transport/start.hpp"
+
+namespace freeform {
+
+struct StartReport {
+    std::string requested = "flat";  // what the scene asked for: flat, transport, heightmap, paraboloid
+    std::string used = "flat";       // what the design started from
+    std::string fallback_reason;     // why a requested transport start was not used
+    TransportReport transport;       // when a transport start was attempted
+    double error = -1, energy = -1;  // of the start, exact tracer at the final level (-1: not measured)
+    double flat_error = -1;          // of a flat surface, for comparison (transport starts only)
+    double seconds = 0;              // solve, fit and evaluation
+    int levels_planned = 0, levels_used = 0;
+    std::string plan;                // the schedule's decision, in words
+};
+
+struct SurfaceEvaluation {
+    double error = 0, energy = 0;
+};
+
+// Error and energy of `surface` under the exact height-field tracer at the scene's own
+// receiver resolution, with the rays of `seed`.
+inline SurfaceEvaluation evaluate_surface(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
+                                          std::uint64_t seed, int threads) {
+    const RaySet rays = generate_rays(scene.light, surface, scene.receiver, seed);
+    const HeightfieldTracer tracer(surface, rays, make_path_params(scene));
+    Histogram hist(scene.receiver.width, scene.receiver.height);
+    TraceTotals totals;
+    tracer.trace_all(exec::omp_t{threads}, hist, totals);
+    const Target t = make_target(target_image, scene.receiver.width, scene.receiver.height, rays.total);
+    std::int64_t l1 = 0;
+    for (std::size_t k = 0; k < hist.cells.size(); ++k) l1 += std::llabs(hist.cells[k] - t.cells[k]);
+    return {double(l1) / (2.0 * double(t.total)), totals.energy()};
+}
+
+inline std::string requested_start(const Scene& scene) {
+    const SurfaceSpec& s = scene.surface;
+    if (!s.initial_pfm.empty()) return "heightmap";
+    if (s.initial_paraboloid) return "paraboloid";
+    return starts_from_transport(scene) ? "transport" : "flat";
+}
+
+// The start of a design on the final mesh of `initial` (the caller's surface). For a
+// transport start, `map` keeps the transport map so that coarser meshes can be fitted
+// to it. A transport start that cannot be made, or that is no better than a flat
+// surface, falls back to `initial` with the reason in the report; a scene that asked
+// for "transport" explicitly gets an InputError instead when its light never reaches
+// the receiver.
+struct DesignStart {
+    Heightmap surface;
+    std::optional<TransportMap> map;
+    StartReport report;
+};
+
+inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
+                                     std::uint64_t seed, int threads) {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
+    DesignStart start;
+    start.report.requested = requested_start(scene);
+    start.report.used = start.report.requested;
+    if (start.report.requested != "transport") {
+        start.surface = std::move(initial);
+        return start;
+    }
+    const auto fall_back = [&](std::string why) {
+        start.report.used = "flat";
+        start.report.fallback_reason = std::move(why);
+        start.map.reset();
+        start.surface = std::move(initial);
+    };
+    if (const std::string why = transport_unsupported_reason(scene); !why.empty()) {
+        fall_back(why);
+        start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+        return start;
+    }
+    try {
+        start.map = solve_transport(scene, initial, target_image, seed);
+    } catch (const InputError& e) {
+        if (scene.surface.initial_shape == InitialShape::transport) throw;
+        fall_back(e.what());
+        start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+        return start;
+    }
+    start.report.transport = start.map->report;
+    start.surface = surface_from_transport(scene, *start.map, initial.nx(), initial.ny(), start.report.transport);
+    const SurfaceEvaluation mine = evaluate_surface(scene, start.surface, target_image, seed, threads);
+    const SurfaceEvaluation flat = evaluate_surface(scene, initial, target_image, seed, threads);
+    start.report.error = mine.error;
+    start.report.energy = mine.energy;
+    start.report.flat_error = flat.error;
+    // Judged by the exact model: a start that is not better than flat is no start.
+    if (!(mine.error < flat.error)) {
+        fall_back("the transport surface was no better than flat under the exact tracer (error " +
+                  std::to_string(mine.error) + " against " + std::to_string(flat.error) + ")");
+        start.report.error = flat.error;
+        start.report.energy = flat.energy;
+    }
+    start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    return start;
+}
+
+}  // namespace freeform

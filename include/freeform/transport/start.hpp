@@ -1,0 +1,365 @@
+#pragma once
+// The transport start (DESIGN.md §4b): a surface that already puts the light roughly
+// where the target wants it, for the annealer to refine under the exact model.
+//
+//  1. Source density μ: the scene's own rays (generate_rays: uniform for collimated
+//     light, cos θ / r² and the intensity profile for a point, the disk's irradiance)
+//     land where a *flat* surface would send them; μ is that footprint on the receiver
+//     plane. Target density ν: the target image on the same grid.
+//  2. The quadratic-cost optimal map T from μ to ν (transport/grid_ot.hpp).
+//  3. Vertex (u, v) of the mesh, whose flat landing point is p, must send its light to
+//     T(p): the vector law of reflection (or refraction at the lens's front face, with
+//     the flat back face solved for) gives its normal, and a least-squares fit of
+//     heights to those slopes (Eigen sparse CG) the surface. The fit is repeated a few
+//     times with the new surface points, because the receiver is at a finite distance
+//     and a point light's direction depends on the height.
+//  4. Heights are shifted into surface.height_bounds; a surface that does not fit is
+//     clamped, and the report says by how much it exceeded them.
+// The result is judged by the exact tracer, never by the transport residual (the
+// designer does that and writes both to metrics.json).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "../core/error.hpp"
+#include "../core/histogram.hpp"
+#include "../core/math.hpp"
+#include "../scene/rays.hpp"
+#include "../scene/scene.hpp"
+#include "../surface/heightmap.hpp"
+#include "grid_ot.hpp"
+
+namespace freeform {
+
+struct TransportOptions {
+    int max_grid = 256;            // transport grid cells along the longer side, at most
+    double rays_per_grid_cell = 16;  // rays sampling the source footprint, per grid cell it covers
+    int fit_iterations = 4;        // map → normals → heights rounds (near field)
+    OtOptions ot{};
+};
+
+// What the transport start did, for metrics.json.
+struct TransportReport {
+    bool used = false;            // false: the scene fell back to a flat start
+    std::string fallback_reason;  // why, when not used
+    int grid_x = 0, grid_y = 0;   // transport grid cells
+    double cell_size = 0;         // metres
+    int ot_iterations = 0;
+    double ot_residual = 1;       // ½ Σ|ν − T#μ| on the transport grid (not the design error)
+    double ot_seconds = 0, fit_seconds = 0;
+    int fit_iterations = 0;
+    double height_range = 0;      // max − min of the fitted heights (metres, active cells)
+    double height_excess = 0;     // by how much the range exceeded height_bounds (0: it fits)
+    double unmapped_fraction = 0; // vertices whose flat landing missed the receiver plane
+};
+
+// The transport map of a scene, reusable for several meshes.
+struct TransportMap {
+    OtResult ot;                 // in receiver-local metres (u right, v up)
+    TransportReport report;      // grid and solver fields filled
+};
+
+namespace transport_detail {
+
+// The scene's optics in the surface frame, double precision.
+struct Optics {
+    int light = 0;  // 0 collimated, 1 point, 2 disk (its centre stands for the source)
+    Vec3d direction{}, position{};
+    bool lens = false;
+    double ior = 1.5, thickness = 0.01;
+    Vec3d rc{}, ru{}, rv{}, rn{};  // receiver centre, axes, front normal
+
+    explicit Optics(const Scene& s) {
+        const Frame& f = s.surface.frame;
+        if (const auto* c = std::get_if<CollimatedLight>(&s.light.shape)) {
+            light = 0;
+            direction = normalize(f.dir_to_local(c->direction));
+        } else if (const auto* p = std::get_if<PointLight>(&s.light.shape)) {
+            light = 1;
+            position = f.to_local(p->position);
+        } else {
+            light = 2;
+            position = f.to_local(std::get<DiskLight>(s.light.shape).center);
+        }
+        if (const auto* l = std::get_if<Lens>(&s.surface.material)) lens = true, ior = l->ior, thickness = l->thickness;
+        rc = f.to_local(s.receiver.frame.origin);
+        ru = f.dir_to_local(s.receiver.frame.u);
+        rv = f.dir_to_local(s.receiver.frame.v);
+        rn = f.dir_to_local(s.receiver.frame.w);
+    }
+
+    Vec3d incoming(Vec3d p) const { return light == 0 ? direction : normalize(p - position); }
+
+    // Where light arriving along d at the point s of the flat surface (w = 0) lands on
+    // the receiver plane, in receiver-local metres; nothing if it never meets its front.
+    std::optional<Vec2d> flat_landing(Vec3d s, Vec3d d) const {
+        Vec3d o = s, out = d;
+        if (!lens) {
+            out.z = -out.z;
+        } else {
+            // Through a flat slab the direction is unchanged; the exit point moves.
+            const double ct = std::sqrt(std::max(0.0, 1.0 - (1.0 - d.z * d.z) / (ior * ior)));
+            const Vec3d g{d.x / ior, d.y / ior, -ct};
+            o = s + g * (thickness / std::max(ct, 1e-9));
+        }
+        const double dn = dot(out, rn);
+        if (!(dn < 0)) return std::nullopt;
+        const double t = dot(rc - o, rn) / dn;
+        if (!(t > 0)) return std::nullopt;
+        const Vec3d q = o + t * out - rc;
+        return Vec2d{dot(q, ru), dot(q, rv)};
+    }
+
+    // The unit normal at surface point s that sends light arriving along d_in to the
+    // point q (surface frame): reflection, or refraction into the lens whose flat back
+    // face then bends the ray towards q.
+    Vec3d normal_towards(Vec3d s, Vec3d d_in, Vec3d q) const {
+        Vec3d n;
+        if (!lens) {
+            n = normalize(q - s) - d_in;
+        } else {
+            // The direction g inside the glass: the back face refracts it into the
+            // direction from the exit point e to q. Solve for e by fixed point.
+            Vec3d e{s.x, s.y, -thickness}, g{0, 0, -1};
+            for (int k = 0; k < 6; ++k) {
+                const Vec3d out = normalize(q - e);
+                const Vec3d t{out.x / ior, out.y / ior, 0};
+                const double tz = std::sqrt(std::max(1e-12, 1.0 - t.x * t.x - t.y * t.y));
+                g = {t.x, t.y, -tz};
+                e = s + g * ((s.z + thickness) / tz);
+            }
+            n = d_in - ior * g;  // n1 d_in − n2 d_out, n1 = 1 outside
+        }
+        if (n.z < 0) n = -n;
+        return normalize(n);
+    }
+};
+
+// Area-weighted overlap of the cells of two regular 1-D grids: rows = cells of the
+// first (origin a0, step ha, na cells), columns = cells of the second.
+inline Eigen::MatrixXd overlap_1d(double a0, double ha, int na, double b0, double hb, int nb) {
+    Eigen::MatrixXd m = Eigen::MatrixXd::Zero(na, nb);
+    for (int i = 0; i < na; ++i) {
+        const double lo = a0 + i * ha, hi = lo + ha;
+        const int k0 = std::max(0, int(std::floor((lo - b0) / hb))), k1 = std::min(nb - 1, int(std::floor((hi - b0) / hb)));
+        for (int k = k0; k <= k1; ++k) {
+            const double o = std::min(hi, b0 + (k + 1) * hb) - std::max(lo, b0 + k * hb);
+            if (o > 0) m(i, k) = o / hb;
+        }
+    }
+    return m;
+}
+
+inline void splat(Eigen::ArrayXXd& m, const OtGrid& g, double x, double y, double w) {
+    const double fx = std::clamp((x - g.x0) / g.hx - 0.5, 0.0, double(g.nx - 1));
+    const double fy = std::clamp((y - g.y0) / g.hy - 0.5, 0.0, double(g.ny - 1));
+    const int i = std::min(int(fx), g.nx - 2), j = std::min(int(fy), g.ny - 2);
+    const double a = fx - i, b = fy - j;
+    m(j, i) += w * (1 - a) * (1 - b);
+    m(j, i + 1) += w * a * (1 - b);
+    m(j + 1, i) += w * (1 - a) * b;
+    m(j + 1, i + 1) += w * a * b;
+}
+
+}  // namespace transport_detail
+
+// Why a scene cannot start from a transport map (empty: it can).
+inline std::string transport_unsupported_reason(const Scene& scene) {
+    if (!scene.target) return "the scene has no target";
+    if (!scene.meshes.empty()) return "extra meshes can reflect or block light: the transport model has none";
+    return {};
+}
+
+// Solves the transport from the light's flat-surface footprint to the target image
+// (relative irradiance, any resolution). `surface` gives the aperture (its mask).
+inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
+                                    std::uint64_t seed, const TransportOptions& options = {}) {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
+    if (target_image.size() == 0 || !(target_image.maxCoeff() > 0))
+        throw InputError("target: the image is entirely black: there is nothing to send light to");
+    const transport_detail::Optics optics(scene);
+    const Receiver& rec = scene.receiver;
+    const double pu = rec.size.x / rec.width, pv = rec.size.y / rec.height;
+
+    // The footprint of the flat surface, from a coarse sampling of the aperture.
+    double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
+    double fp_lo_u = 1e300, fp_hi_u = -1e300, fp_lo_v = 1e300, fp_hi_v = -1e300;
+    int landed = 0;
+    for (int b = 0; b <= 32; ++b)
+        for (int a = 0; a <= 32; ++a) {
+            const double u = (a / 32.0 - 0.5) * surface.size().x, v = (b / 32.0 - 0.5) * surface.size().y;
+            if (!surface.in_aperture(u, v)) continue;
+            const Vec3d s{u, v, 0};
+            const auto p = optics.flat_landing(s, optics.incoming(s));
+            if (!p) continue;
+            ++landed;
+            fp_lo_u = std::min(fp_lo_u, p->x), fp_hi_u = std::max(fp_hi_u, p->x);
+            fp_lo_v = std::min(fp_lo_v, p->y), fp_hi_v = std::max(fp_hi_v, p->y);
+        }
+    if (landed == 0)
+        throw InputError("surface.initial: \"transport\": light reflected (or refracted) by a flat surface never meets "
+                         "the receiver's front; use \"flat\" or check receiver.center and receiver.normal");
+    // The grid covers the receiver and the footprint (the latter limited to three times
+    // the receiver's size), fine enough to resolve both the receiver's pixels and the
+    // footprint at about 100 cells along its longer side.
+    const double limit_u = 1.5 * rec.size.x, limit_v = 1.5 * rec.size.y;
+    lo_u = std::min(lo_u, std::max(fp_lo_u, -limit_u)), hi_u = std::max(hi_u, std::min(fp_hi_u, limit_u));
+    lo_v = std::min(lo_v, std::max(fp_lo_v, -limit_v)), hi_v = std::max(hi_v, std::min(fp_hi_v, limit_v));
+    const double fp_extent = std::max(fp_hi_u - fp_lo_u, fp_hi_v - fp_lo_v);
+    double cell = std::min({pu, pv, fp_extent > 0 ? fp_extent / 100.0 : pu});
+    cell = std::max(cell, std::max(hi_u - lo_u, hi_v - lo_v) / options.max_grid);
+    OtGrid g;
+    g.nx = std::max(2, int(std::ceil((hi_u - lo_u) / cell - 1e-9)));
+    g.ny = std::max(2, int(std::ceil((hi_v - lo_v) / cell - 1e-9)));
+    g.hx = g.hy = cell;
+    g.x0 = 0.5 * (lo_u + hi_u) - 0.5 * g.nx * cell;
+    g.y0 = 0.5 * (lo_v + hi_v) - 0.5 * g.ny * cell;
+
+    // ν: the target, area-averaged onto the grid (image row 0 is the top, largest v).
+    const ImageD flipped = target_image.colwise().reverse();
+    const double tu = rec.size.x / double(target_image.cols()), tv = rec.size.y / double(target_image.rows());
+    const Eigen::MatrixXd ox = transport_detail::overlap_1d(g.x0, g.hx, g.nx, -0.5 * rec.size.x, tu, int(target_image.cols()));
+    const Eigen::MatrixXd oy = transport_detail::overlap_1d(g.y0, g.hy, g.ny, -0.5 * rec.size.y, tv, int(target_image.rows()));
+    const Eigen::ArrayXXd nu = (oy * flipped.matrix() * ox.transpose()).array().max(0.0);
+
+    // μ: the light's rays, landed by the flat surface.
+    const double fp_cells = std::max(1.0, (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
+    Light light = scene.light;
+    light.rays = std::clamp<std::int64_t>(std::int64_t(options.rays_per_grid_cell * fp_cells), 4096, 4'000'000);
+    const RaySet rays = generate_rays(light, surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL));
+    Eigen::ArrayXXd mu = Eigen::ArrayXXd::Zero(g.ny, g.nx);
+    double lost = 0, total = 0;
+    for (std::int64_t k = 0; k < rays.size(); ++k) {
+        const Vec3d o(rays.origin[std::size_t(k)]), d(rays.direction[std::size_t(k)]);
+        const double w = double(rays.weight[std::size_t(k)]);
+        total += w;
+        const Vec3d s = o + d * (-o.z / d.z);
+        const auto p = optics.flat_landing(s, d);
+        if (!p) {
+            lost += w;
+            continue;
+        }
+        transport_detail::splat(mu, g, p->x, p->y, w);
+    }
+    if (!(mu.sum() > 0))
+        throw InputError("surface.initial: \"transport\": no light from the aperture reaches the receiver plane");
+
+    TransportMap m;
+    m.ot = solve_grid_ot(g, mu, nu, options.ot);
+    m.report.grid_x = g.nx;
+    m.report.grid_y = g.ny;
+    m.report.cell_size = cell;
+    m.report.ot_iterations = m.ot.iterations;
+    m.report.ot_residual = m.ot.residual;
+    m.report.ot_seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    m.report.unmapped_fraction = total > 0 ? lost / total : 0;
+    m.report.used = true;
+    return m;
+}
+
+// The surface of `nx × ny` vertices (placed like `like`) that realises the map.
+inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& map, int nx, int ny,
+                                        TransportReport& report, const TransportOptions& options = {}) {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
+    const SurfaceSpec& spec = scene.surface;
+    Heightmap hm(nx, ny, spec.size, spec.h_min, spec.h_max, spec.frame, spec.aperture);
+    const transport_detail::Optics optics(scene);
+    const int n = nx * ny;
+    // Where each vertex must send its light (surface frame), from its flat landing point.
+    std::vector<Vec3d> goal(static_cast<std::size_t>(n));
+    std::vector<std::uint8_t> active(std::size_t(n), 0), mapped(std::size_t(n), 0);
+    for (int j = 0; j + 1 < ny; ++j)
+        for (int i = 0; i + 1 < nx; ++i)
+            if (hm.cell_active(i, j))
+                for (int b = 0; b < 2; ++b)
+                    for (int a = 0; a < 2; ++a) active[std::size_t((j + b) * nx + i + a)] = 1;
+    int unmapped = 0, active_count = 0;
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            const std::size_t p = std::size_t(j * nx + i);
+            const Vec3d s{hm.u_of(i), hm.v_of(j), 0};
+            const auto land = optics.flat_landing(s, optics.incoming(s));
+            active_count += active[p];
+            if (!land) {
+                unmapped += active[p];
+                continue;
+            }
+            const Vec2d q = map.ot.transport(land->x, land->y);
+            goal[p] = optics.rc + q.x * optics.ru + q.y * optics.rv;
+            mapped[p] = 1;
+        }
+    report.unmapped_fraction = active_count > 0 ? double(unmapped) / active_count : 0;
+
+    // Heights whose edge difference quotients best match the mean slope of each edge's
+    // ends, in least squares: the normal equations are a Neumann Poisson problem on the
+    // vertex grid (every edge weighs the same, so one fast solver serves every aperture:
+    // vertices outside an elliptical aperture follow the map's extension and keep the
+    // field smooth; they do not meet light).
+    const double du = hm.du(), dv = hm.dv();
+    const NeumannPoisson poisson(nx, ny, du, dv);
+    Eigen::ArrayXXd h = Eigen::ArrayXXd::Zero(ny, nx);
+    Eigen::ArrayXXd su = Eigen::ArrayXXd::Zero(ny, nx), sv = Eigen::ArrayXXd::Zero(ny, nx);
+    const double bound_mid = 0.5 * (double(spec.h_min) + double(spec.h_max));
+    const double bound_range = double(spec.h_max) - double(spec.h_min);
+    for (int round = 0; round < std::max(1, options.fit_iterations); ++round) {
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) {
+                const std::size_t p = std::size_t(j * nx + i);
+                if (!mapped[p]) {
+                    su(j, i) = sv(j, i) = 0;
+                    continue;
+                }
+                const Vec3d s{hm.u_of(i), hm.v_of(j), h(j, i)};
+                const Vec3d nn = optics.normal_towards(s, optics.incoming(s), goal[p]);
+                const double nz = std::max(nn.z, 1e-3);
+                su(j, i) = -nn.x / nz;
+                sv(j, i) = -nn.y / nz;
+            }
+        // Right-hand side: minus the divergence of the edge slopes.
+        Eigen::ArrayXXd rhs = Eigen::ArrayXXd::Zero(ny, nx);
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) {
+                if (i + 1 < nx) {
+                    const double e = 0.5 * (su(j, i) + su(j, i + 1)) / du;
+                    rhs(j, i) -= e, rhs(j, i + 1) += e;
+                }
+                if (j + 1 < ny) {
+                    const double e = 0.5 * (sv(j, i) + sv(j + 1, i)) / dv;
+                    rhs(j, i) -= e, rhs(j + 1, i) += e;
+                }
+            }
+        Eigen::ArrayXXd sol = poisson.solve(rhs);
+        if (!sol.allFinite()) sol.setZero();
+        // Into the bounds: centre the active range in them.
+        double lo = 1e300, hi = -1e300;
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i)
+                if (active[std::size_t(j * nx + i)]) lo = std::min(lo, sol(j, i)), hi = std::max(hi, sol(j, i));
+        if (!(hi >= lo)) lo = hi = 0;
+        sol += bound_mid - 0.5 * (lo + hi);
+        const double change = (sol - h).abs().maxCoeff();
+        h = sol;
+        report.height_range = hi - lo;
+        report.height_excess = std::max(0.0, (hi - lo) - bound_range);
+        report.fit_iterations = round + 1;
+        // The surface points moved too little to change the normals: done.
+        if (round > 0 && change < 1e-4 * std::max(hi - lo, 1e-9)) break;
+    }
+    std::vector<float> heights(static_cast<std::size_t>(n));
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) heights[std::size_t(j * nx + i)] = float(h(j, i));
+    hm.set_heights(heights);  // clamps to the bounds, computes the normals
+    report.fit_seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    return hm;
+}
+
+}  // namespace freeform

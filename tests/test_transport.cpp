@@ -1,0 +1,289 @@
+// The transport start: the grid OT solver against maps known in closed form, mass
+// conservation and empty regions, and surfaces fitted to a map checked with the exact
+// tracer (a collimated point focus must come out as the paraboloid that focuses it).
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <freeform/design/designer.hpp>
+#include <freeform/design/start.hpp>
+#include <freeform/transport/grid_ot.hpp>
+#include <freeform/transport/start.hpp>
+
+#include "support.hpp"
+
+using namespace freeform;
+
+namespace {
+
+OtGrid unit_grid(int n) { return OtGrid{n, n, 0.0, 0.0, 1.0 / n, 1.0 / n}; }
+
+// Largest |T(x) − expected(x)| over the cell centres where `where` holds, in cells.
+template <class Expected, class Where>
+double max_map_error_cells(const OtResult& r, Expected expected, Where where) {
+    double worst = 0;
+    for (int j = 0; j < r.grid.ny; ++j)
+        for (int i = 0; i < r.grid.nx; ++i) {
+            const double x = r.grid.x_of(i), y = r.grid.y_of(j);
+            if (!where(x, y)) continue;
+            const Vec2d e = expected(x, y);
+            worst = std::max({worst, std::abs(r.map_x(j, i) - e.x) / r.grid.hx, std::abs(r.map_y(j, i) - e.y) / r.grid.hy});
+        }
+    return worst;
+}
+
+// The standard normal CDF.
+double phi_cdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
+
+}  // namespace
+
+TEST_CASE("grid OT: uniform to the same uniform density is the identity map") {
+    const OtGrid g = unit_grid(48);
+    const Eigen::ArrayXXd m = Eigen::ArrayXXd::Constant(48, 48, 1.0);
+    const OtResult r = solve_grid_ot(g, m, m);
+    CHECK(r.residual < 1e-3);
+    CHECK(max_map_error_cells(r, [](double x, double y) { return Vec2d{x, y}; }, [](double, double) { return true; }) <
+          0.05);
+}
+
+TEST_CASE("grid OT: a uniform square onto a smaller uniform square is a scaling") {
+    const int n = 64;
+    const OtGrid g = unit_grid(n);
+    Eigen::ArrayXXd src = Eigen::ArrayXXd::Constant(n, n, 1.0), dst = Eigen::ArrayXXd::Zero(n, n);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (std::abs(g.x_of(i) - 0.5) < 0.25 && std::abs(g.y_of(j) - 0.5) < 0.25) dst(j, i) = 1.0;
+    const OtResult r = solve_grid_ot(g, src, dst);
+    // T(x) = ½ + (x − ½)/2; away from the border, where the grid truncates the map.
+    const double err = max_map_error_cells(
+        r, [](double x, double y) { return Vec2d{0.5 + 0.5 * (x - 0.5), 0.5 + 0.5 * (y - 0.5)}; },
+        [](double x, double y) { return std::abs(x - 0.5) < 0.4 && std::abs(y - 0.5) < 0.4; });
+    CHECK(err < 0.5);
+    // Mass conservation: everything the source has is delivered, all of it to the square.
+    CHECK(r.pushed.sum() == doctest::Approx(dst.sum()).epsilon(1e-12));
+    double outside = 0;
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (std::abs(g.x_of(i) - 0.5) > 0.25 + 1.0 / n || std::abs(g.y_of(j) - 0.5) > 0.25 + 1.0 / n)
+                outside += r.pushed(j, i);
+    CHECK(outside == 0);
+}
+
+TEST_CASE("grid OT: a Gaussian onto a uniform density follows the 1-D closed form") {
+    // Density varies along x only: the optimal map is the monotone rearrangement
+    // T(x) = F_uniform⁻¹(F_gauss(x)) along x and the identity along y.
+    const int n = 96;
+    const OtGrid g = unit_grid(n);
+    const double s = 0.15;
+    Eigen::ArrayXXd src(n, n), dst = Eigen::ArrayXXd::Constant(n, n, 1.0);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) src(j, i) = phi_cdf((g.x0 + (i + 1) * g.hx - 0.5) / s) - phi_cdf((g.x0 + i * g.hx - 0.5) / s);
+    const OtResult r = solve_grid_ot(g, src, dst);
+    const double lo = phi_cdf(-0.5 / s), hi = phi_cdf(0.5 / s);
+    const auto expected = [&](double x, double y) { return Vec2d{(phi_cdf((x - 0.5) / s) - lo) / (hi - lo), y}; };
+    CHECK(max_map_error_cells(r, expected, [](double x, double y) {
+              return std::abs(x - 0.5) < 0.3 && std::abs(y - 0.5) < 0.4;
+          }) < 0.75);
+}
+
+TEST_CASE("grid OT: a region of the target with no mass receives no light") {
+    // Two bars with an empty gap between them: the map splits the source along a line.
+    const int n = 64;
+    const OtGrid g = unit_grid(n);
+    Eigen::ArrayXXd src = Eigen::ArrayXXd::Constant(n, n, 1.0), dst = Eigen::ArrayXXd::Constant(n, n, 1.0);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (std::abs(g.y_of(j) - 0.5) < 0.2) dst(j, i) = 0;
+    const OtResult r = solve_grid_ot(g, src, dst);
+    // Sample the map densely; count the mass that lands inside the gap: none, although
+    // the smooth map interpolates across the split line (see OtResult::transport).
+    double in_gap = 0, total = 0;
+    for (int j = 0; j < 4 * n; ++j)
+        for (int i = 0; i < 4 * n; ++i) {
+            const Vec2d t = r.transport((i + 0.5) / (4.0 * n), (j + 0.5) / (4.0 * n));
+            total += 1;
+            if (std::abs(t.y - 0.5) < 0.2 - 1.0 / n) in_gap += 1;
+        }
+    CHECK(in_gap == 0);
+    CHECK(total == 16 * n * n);
+    // The solver's own account: what the exact map delivers to the gap.
+    double pushed_in_gap = 0;
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (dst(j, i) == 0) pushed_in_gap += r.pushed(j, i);
+    CHECK(pushed_in_gap == 0);
+}
+
+TEST_CASE("grid OT: bad input names what is wrong") {
+    const OtGrid g = unit_grid(8);
+    const Eigen::ArrayXXd one = Eigen::ArrayXXd::Constant(8, 8, 1.0), zero = Eigen::ArrayXXd::Zero(8, 8);
+    CHECK_THROWS_WITH_AS(solve_grid_ot(g, one, zero), doctest::Contains("entirely black"), InputError);
+    CHECK_THROWS_WITH_AS(solve_grid_ot(g, zero, one), doctest::Contains("no light"), InputError);
+    Eigen::ArrayXXd neg = one;
+    neg(3, 3) = -1;
+    CHECK_THROWS_AS(solve_grid_ot(g, neg, one), InputError);
+}
+
+namespace {
+
+// A small bright disk at the receiver's centre: the map of a focusing mirror.
+ImageD spot_target(int w, int h, double radius_px) {
+    ImageD t = ImageD::Zero(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            if (std::hypot(x + 0.5 - 0.5 * w, y + 0.5 - 0.5 * h) < radius_px) t(y, x) = 1;
+    return t;
+}
+
+}  // namespace
+
+TEST_CASE("transport start: a point-focus map gives the focusing paraboloid, checked by the exact tracer") {
+    Scene s = testing::basic_scene(100);
+    s.target = TargetSpec{};
+    const ImageD target = spot_target(100, 100, 1.5);
+    Heightmap flat = testing::surface_for(s, 41);
+    TransportMap map = solve_transport(s, flat, target, 1);
+    TransportReport rep = map.report;
+    const Heightmap hm = surface_from_transport(s, map, 41, 41, rep);
+    CHECK(rep.height_excess == 0);
+    // Heights against h = r²/(4f), f = 0.5 m (the receiver's distance), up to a constant.
+    double mean_diff = 0;
+    for (int j = 0; j < 41; ++j)
+        for (int i = 0; i < 41; ++i) mean_diff += hm(i, j) - (hm.u_of(i) * hm.u_of(i) + hm.v_of(j) * hm.v_of(j)) / 2.0;
+    mean_diff /= 41.0 * 41.0;
+    double worst = 0;
+    for (int j = 0; j < 41; ++j)
+        for (int i = 0; i < 41; ++i)
+            worst = std::max(worst, std::abs(hm(i, j) - (hm.u_of(i) * hm.u_of(i) + hm.v_of(j) * hm.v_of(j)) / 2.0 -
+                                             mean_diff));
+    // A spot of radius r_s instead of a point lets each slope deviate by up to r_s/(2 d),
+    // the heights by that much over the half diagonal.
+    const double spot = 1.5 * 0.2 / 100, half_diagonal = 0.05 * std::sqrt(2.0);
+    CHECK(worst < spot / (2 * 0.5) * half_diagonal);
+    // Through the exact tracer, nearly all the light lands in the spot.
+    const auto traced = testing::trace_scene(s, hm);
+    double in_spot = 0;
+    for (int y = 0; y < 100; ++y)
+        for (int x = 0; x < 100; ++x)
+            if (std::hypot(x + 0.5 - 50, y + 0.5 - 50) < 4.5) in_spot += double(traced.histogram.cells[std::size_t(y) * 100 + x]);
+    CHECK(in_spot / double(traced.totals.emitted) > 0.9);
+}
+
+namespace {
+
+// Error of the transport start of `s` (and of a flat surface) under the exact tracer.
+std::pair<double, double> start_and_flat_error(const Scene& s, const ImageD& target, int mesh) {
+    const DesignStart st = make_design_start(s, testing::surface_for(s, mesh), target, 3, 1);
+    REQUIRE(st.report.used == "transport");
+    return {st.report.error, st.report.flat_error};
+}
+
+// A bar across the upper part of the receiver and a block lower left: mass off-centre,
+// an empty gap, and sharp edges.
+ImageD two_blocks(int w, int h) {
+    ImageD t = ImageD::Zero(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const double u = (x + 0.5) / w, v = (y + 0.5) / h;
+            if ((v > 0.15 && v < 0.35 && u > 0.1 && u < 0.9) || (v > 0.55 && v < 0.9 && u > 0.15 && u < 0.5)) t(y, x) = 1;
+        }
+    return t;
+}
+
+}  // namespace
+
+TEST_CASE("transport start: every light, material, aperture and a tilted receiver start far better than flat") {
+    const ImageD target = two_blocks(60, 60);
+    Scene base = testing::basic_scene(60);
+    base.receiver.deposit = Deposit::bilinear;
+    base.target = TargetSpec{};
+    SUBCASE("collimated mirror, rect aperture") {
+        const auto [e, f] = start_and_flat_error(base, target, 31);
+        CHECK(e < 0.2);
+        CHECK(e < 0.4 * f);
+    }
+    SUBCASE("point light, elliptical aperture") {
+        Scene s = base;
+        s.light.shape = PointLight{{0, 0, 0.3}, {}, {}};
+        s.surface.aperture = Aperture::ellipse;
+        s.receiver.size = {0.3, 0.3};
+        const auto [e, f] = start_and_flat_error(s, target, 31);
+        CHECK(e < 0.2);
+        CHECK(e < 0.4 * f);
+    }
+    SUBCASE("disk light") {
+        Scene s = base;
+        s.light.shape = DiskLight{{0, 0, 0.3}, {0, 0, -1}, 0.002};
+        s.receiver.size = {0.3, 0.3};
+        const auto [e, f] = start_and_flat_error(s, target, 31);
+        CHECK(e < 0.25);
+        CHECK(e < 0.4 * f);
+    }
+    SUBCASE("lens, receiver below") {
+        Scene s = base;
+        s.surface.material = Lens{1.49, 0.01};
+        s.surface.h_min = -0.008, s.surface.h_max = 0.008;
+        s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.receiver.size = {0.15, 0.15};
+        const auto [e, f] = start_and_flat_error(s, target, 31);
+        CHECK(e < 0.2);
+        CHECK(e < 0.4 * f);
+    }
+    SUBCASE("tilted receiver, light arriving at an angle") {
+        Scene s = base;
+        s.light.shape = CollimatedLight{{0.2, 0, -1}};
+        s.receiver.frame = make_frame({0.15, 0, 0.5}, {-0.3, 0, -1}, {0, 1, 0}, "receiver");
+        const auto [e, f] = start_and_flat_error(s, target, 31);
+        CHECK(e < 0.2);
+        CHECK(e < 0.4 * f);
+    }
+}
+
+TEST_CASE("transport start: deterministic, and the designer records it and plans from its error") {
+    Scene s = testing::basic_scene(60);
+    s.receiver.deposit = Deposit::bilinear;
+    s.target = TargetSpec{};
+    const ImageD target = two_blocks(60, 60);
+    const DesignStart a = make_design_start(s, testing::surface_for(s, 31), target, 5, 1);
+    const DesignStart b = make_design_start(s, testing::surface_for(s, 31), target, 5, 2);
+    CHECK(a.surface.heights() == b.surface.heights());
+    CHECK(a.report.error == b.report.error);
+
+    DesignOptions o = s.optimise;
+    o.seed = 5;
+    o.time_budget = 0;
+    o.max_iterations = 3000;
+    o.threads = 1;
+    const DesignResult r = design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; });
+    CHECK(r.start.used == "transport");
+    CHECK(r.start.levels_planned >= r.start.levels_used);
+    CHECK(r.start.levels_used >= 1);
+    CHECK(r.start.error == doctest::Approx(a.report.error));
+    CHECK(r.value.error <= r.start.error + 1e-9);  // annealing keeps its best state
+
+    // "flat" is still a start of its own.
+    Scene flat_scene = s;
+    flat_scene.surface.initial_shape = InitialShape::flat;
+    CHECK(make_design_start(flat_scene, testing::surface_for(s, 31), target, 5, 1).report.used == "flat");
+}
+
+TEST_CASE("transport start: scenes it cannot model fall back to flat and say why") {
+    Scene s = testing::basic_scene(40);
+    s.target = TargetSpec{};
+    s.meshes.push_back(MeshSpec{"wall.obj", false});
+    const DesignStart st = make_design_start(s, testing::surface_for(s, 21), two_blocks(40, 40), 1, 1);
+    CHECK(st.report.requested == "transport");
+    CHECK(st.report.used == "flat");
+    CHECK(st.report.fallback_reason.find("meshes") != std::string::npos);
+}
+
+TEST_CASE("transport start: light that never reaches the receiver is an input error when transport was asked for") {
+    Scene s = testing::basic_scene(40);
+    s.target = TargetSpec{};
+    s.surface.initial_shape = InitialShape::transport;
+    // The receiver faces away from the light the flat mirror sends up.
+    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+    CHECK_THROWS_WITH_AS(make_design_start(s, testing::surface_for(s, 21), two_blocks(40, 40), 1, 1),
+                         doctest::Contains("surface.initial"), InputError);
+}
