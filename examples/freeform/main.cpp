@@ -328,6 +328,9 @@ int run_design(const DesignArgs& a) {
     const auto [nx, ny] = final_mesh(scene, &target);
     Heightmap initial = io::make_initial_heightmap(scene, nx, ny);
     const DesignOptions& options = scene.optimise;
+    // A transport start the scene asks for by name must be possible: say so before any work.
+    if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == "transport")
+        flat_footprint(scene, initial);
 
     std::signal(SIGINT, on_sigint);
     StatusLine status(!a.quiet);
@@ -439,8 +442,11 @@ int run_design(const DesignArgs& a) {
         std::printf("  start: %s%s%s", st.used.c_str(),
                     st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
                     st.fallback_reason.empty() ? "" : (" (transport not used: " + st.fallback_reason + ")").c_str());
-        if (st.requested == "transport" && st.transport.height_excess > 0)
-            std::printf(", its heights exceed surface.height_bounds by %.2f mm (clamped)", st.transport.height_excess * 1e3);
+        if (st.used == "transport" && st.transport.height_excess > 0)
+            std::printf("; it needs %.1f mm of height range, surface.height_bounds allow %.1f mm, so it was clamped "
+                        "(widen the bounds to keep the whole map)",
+                        st.transport.height_range * 1e3,
+                        (st.transport.height_range - st.transport.height_excess) * 1e3);
         if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
         std::printf("\n");
         std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",

@@ -161,6 +161,14 @@ if(GROUP STREQUAL "errors")
     render "${DATA}/heightfield-with-mesh.json" --out out-heightfield-trace-key-with-meshes)
   expect_input_error(design-without-target "target"
     design "${valid}" --out out-design-without-target)
+  expect_input_error(target-black-design "black.png"
+    design "${DATA}/target-black.json" --out out-target-black-design)
+  expect_input_error(target-black-start-only "black.png"
+    design "${DATA}/target-black.json" --start-only --out out-target-black-start-only)
+  expect_input_error(transport-unreachable "surface.initial"
+    design "${DATA}/transport-unreachable.json" --out out-transport-unreachable)
+  expect_input_error(start-level-bad "optimise.start_level"
+    design "${DATA}/start-level-bad.json" --out out-start-level-bad)
   expect_input_error(design-zero-time-budget "--time-budget"
     design "${DATA}/design-tiny.json" --time-budget 0 --out out-design-zero-time-budget)
 
@@ -307,6 +315,38 @@ elseif(GROUP STREQUAL "design")
     file(READ "${WORK}/design1/heightmap.pfm" header LIMIT 16)
     if(NOT header MATCHES "^Pf\n21 21\n")
       fail("heightmap.pfm: unexpected header '${header}' (expected a 21 x 21 grey PFM)")
+    endif()
+  endif()
+
+  # The scene has a target and no "initial": the design starts from the transport surface.
+  if(EXISTS "${m}")
+    file(READ "${m}" text)
+    string(JSON start_used ERROR_VARIABLE e GET "${text}" start used)
+    if(e OR NOT start_used STREQUAL "transport")
+      fail("design: start.used is '${start_used}' (${e}), expected transport")
+    endif()
+    string(JSON start_error ERROR_VARIABLE e GET "${text}" start error)
+    string(JSON flat_error ERROR_VARIABLE e2 GET "${text}" start flat_error)
+    if(e OR e2 OR NOT start_error LESS flat_error)
+      fail("design: start error ${start_error} not below the flat surface's ${flat_error}")
+    endif()
+  endif()
+
+  # --start-only: the start surface alone, no annealing, the same files; its error is
+  # the start error the design reported.
+  run(design-start-only design "${DATA}/design-tiny.json" --start-only --out start1 --quiet)
+  if(NOT rc STREQUAL "0")
+    fail("design --start-only: exit code ${rc}: ${err}")
+  endif()
+  expect_files("${WORK}/start1" ${files})
+  if(EXISTS "${WORK}/start1/metrics.json" AND EXISTS "${m}")
+    json_get(start_iterations "${WORK}/start1/metrics.json" iterations)
+    json_get(start_only_error "${WORK}/start1/metrics.json" error)
+    if(NOT start_iterations EQUAL 0)
+      fail("design --start-only: ${start_iterations} iterations, expected 0")
+    endif()
+    if(NOT start_only_error STREQUAL start_error)
+      fail("design --start-only: error ${start_only_error}, the design's start reported ${start_error}")
     endif()
   endif()
 

@@ -177,6 +177,34 @@ inline std::string transport_unsupported_reason(const Scene& scene) {
     return {};
 }
 
+// Where a flat surface sends the light on the receiver plane (receiver-local metres),
+// from a 33 × 33 sampling of the aperture. Throws InputError when none of it meets the
+// receiver's front: a transport start cannot be made (checked up front by the CLI).
+struct FlatFootprint {
+    double lo_u = 0, hi_u = 0, lo_v = 0, hi_v = 0;
+};
+
+inline FlatFootprint flat_footprint(const Scene& scene, const Heightmap& surface) {
+    const transport_detail::Optics optics(scene);
+    FlatFootprint fp{1e300, -1e300, 1e300, -1e300};
+    int landed = 0;
+    for (int b = 0; b <= 32; ++b)
+        for (int a = 0; a <= 32; ++a) {
+            const double u = (a / 32.0 - 0.5) * surface.size().x, v = (b / 32.0 - 0.5) * surface.size().y;
+            if (!surface.in_aperture(u, v)) continue;
+            const Vec3d s{u, v, 0};
+            const auto p = optics.flat_landing(s, optics.incoming(s));
+            if (!p) continue;
+            ++landed;
+            fp.lo_u = std::min(fp.lo_u, p->x), fp.hi_u = std::max(fp.hi_u, p->x);
+            fp.lo_v = std::min(fp.lo_v, p->y), fp.hi_v = std::max(fp.hi_v, p->y);
+        }
+    if (landed == 0)
+        throw InputError("surface.initial: \"transport\": light reflected (or refracted) by a flat surface never meets "
+                         "the receiver's front; use \"flat\" or check receiver.center and receiver.normal");
+    return fp;
+}
+
 // Solves the transport from the light's flat-surface footprint to the target image
 // (relative irradiance, any resolution). `surface` gives the aperture (its mask).
 inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
@@ -189,24 +217,9 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const Receiver& rec = scene.receiver;
     const double pu = rec.size.x / rec.width, pv = rec.size.y / rec.height;
 
-    // The footprint of the flat surface, from a coarse sampling of the aperture.
     double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
-    double fp_lo_u = 1e300, fp_hi_u = -1e300, fp_lo_v = 1e300, fp_hi_v = -1e300;
-    int landed = 0;
-    for (int b = 0; b <= 32; ++b)
-        for (int a = 0; a <= 32; ++a) {
-            const double u = (a / 32.0 - 0.5) * surface.size().x, v = (b / 32.0 - 0.5) * surface.size().y;
-            if (!surface.in_aperture(u, v)) continue;
-            const Vec3d s{u, v, 0};
-            const auto p = optics.flat_landing(s, optics.incoming(s));
-            if (!p) continue;
-            ++landed;
-            fp_lo_u = std::min(fp_lo_u, p->x), fp_hi_u = std::max(fp_hi_u, p->x);
-            fp_lo_v = std::min(fp_lo_v, p->y), fp_hi_v = std::max(fp_hi_v, p->y);
-        }
-    if (landed == 0)
-        throw InputError("surface.initial: \"transport\": light reflected (or refracted) by a flat surface never meets "
-                         "the receiver's front; use \"flat\" or check receiver.center and receiver.normal");
+    const FlatFootprint fp = flat_footprint(scene, surface);
+    const double fp_lo_u = fp.lo_u, fp_hi_u = fp.hi_u, fp_lo_v = fp.lo_v, fp_hi_v = fp.hi_v;
     // The grid covers the receiver and the footprint (the latter limited to three times
     // the receiver's size), fine enough to resolve both the receiver's pixels and the
     // footprint at about 100 cells along its longer side.
