@@ -9,6 +9,7 @@
 #include <freeform/design/designer.hpp>
 #include <freeform/design/start.hpp>
 #include <freeform/transport/grid_ot.hpp>
+#include <freeform/transport/morph.hpp>
 #include <freeform/transport/start.hpp>
 
 #include "support.hpp"
@@ -286,4 +287,18 @@ TEST_CASE("transport start: light that never reaches the receiver is an input er
     s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
     CHECK_THROWS_WITH_AS(make_design_start(s, testing::surface_for(s, 21), two_blocks(40, 40), 1, 1),
                          doctest::Contains("surface.initial"), InputError);
+}
+
+TEST_CASE("mesh morphing (the alternative): conserves mass and drives the density towards the target") {
+    const int n = 48;
+    const OtGrid g = unit_grid(n);
+    Eigen::ArrayXXd src = Eigen::ArrayXXd::Constant(n, n, 1.0), dst = Eigen::ArrayXXd::Zero(n, n);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            if (std::abs(g.x_of(i) - 0.5) < 0.3 && std::abs(g.y_of(j) - 0.5) < 0.3) dst(j, i) = 1.0;
+    const OtResult r = solve_morphing(g, src, dst);
+    CHECK(r.pushed.sum() == doctest::Approx(dst.sum()).epsilon(1e-12));
+    REQUIRE(!r.residual_history.empty());
+    CHECK(r.residual < 0.5 * r.residual_history.front());
+    CHECK(r.residual < 0.1);
 }

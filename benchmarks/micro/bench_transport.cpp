@@ -7,7 +7,9 @@
 // whole start the exact tracer's error of the fitted surface (start_error).
 //
 // Names: transport/solve/<target>/<receiver px>, transport/fit/<target>/<mesh>,
-//        transport/start/<target>/<mesh> (solve + fit + exact evaluation).
+//        transport/start/<target>/<mesh> (solve + fit + exact evaluation), and
+//        transport/start-morphing/<target>/<mesh>: the same with Poisson mesh morphing
+//        (transport/morph.hpp) in place of the OT solver, the alternative it is measured against.
 // Run: build/release/bin/bench_transport
 #include <cmath>
 #include <string>
@@ -84,6 +86,25 @@ void fit(benchmark::State& state, int which, int mesh) {
     state.counters["fit_iterations"] = r.fit_iterations;
 }
 
+// The alternative: Poisson mesh morphing, then the same fit and the same exact judge.
+void morph_start(benchmark::State& state, int which, int mesh) {
+    const Scene s = bench_scene(200);
+    const ImageD t = target_of(which, 200);
+    const Heightmap flat(mesh, mesh, s.surface.size, s.surface.h_min, s.surface.h_max, s.surface.frame);
+    TransportOptions o;
+    o.method = TransportMethod::morphing;
+    double error = 0, residual = 0;
+    for (auto _ : state) {
+        const TransportMap m = solve_transport(s, flat, t, 1, o);
+        TransportReport r = m.report;
+        const Heightmap h = surface_from_transport(s, m, mesh, mesh, r, o);
+        error = evaluate_surface(s, h, t, 1, 0).error;
+        residual = r.ot_residual;
+    }
+    state.counters["start_error"] = error;
+    state.counters["ot_residual"] = residual;
+}
+
 void start(benchmark::State& state, int which, int mesh) {
     const Scene s = bench_scene(200);
     const ImageD t = target_of(which, 200);
@@ -112,6 +133,10 @@ const int registered = [] {
                 ->UseRealTime();
         benchmark::RegisterBenchmark(("transport/start/" + std::string(target_name(which)) + "/101").c_str(),
                                      [=](benchmark::State& st) { start(st, which, 101); })
+            ->Unit(benchmark::kMillisecond)
+            ->UseRealTime();
+        benchmark::RegisterBenchmark(("transport/start-morphing/" + std::string(target_name(which)) + "/101").c_str(),
+                                     [=](benchmark::State& st) { morph_start(st, which, 101); })
             ->Unit(benchmark::kMillisecond)
             ->UseRealTime();
     }

@@ -93,9 +93,10 @@ struct OtResult {
     // centres, except where that lands on an unlit cell. There the point sits on a crack
     // of the map (it jumps, and interpolation across the jump lands in the gap between
     // two parts of the target), and gets its exact transport, always a lit cell.
+    // (A map without potentials, such as mesh morphing's, is taken as it is.)
     Vec2d transport(double x, double y) const {
         const Vec2d q = (*this)(x, y);
-        return lit(q.x, q.y) ? q : exact(x, y);
+        return phi.size() == 0 || lit(q.x, q.y) ? q : exact(x, y);
     }
 
     // T at any point, bilinear between cell centres (clamped to the grid's centres).

@@ -35,10 +35,16 @@
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
 #include "grid_ot.hpp"
+#include "morph.hpp"
 
 namespace freeform {
 
+// How the map is computed: the back-and-forth OT solver (the default), or Poisson mesh
+// morphing (the alternative it is measured against in bench_transport).
+enum class TransportMethod { back_and_forth, morphing };
+
 struct TransportOptions {
+    TransportMethod method = TransportMethod::back_and_forth;
     int max_grid = 256;            // transport grid cells along the longer side, at most
     double rays_per_grid_cell = 16;  // rays sampling the source footprint, per grid cell it covers
     int fit_iterations = 4;        // map → normals → heights rounds (near field)
@@ -266,7 +272,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
         throw InputError("surface.initial: \"transport\": no light from the aperture reaches the receiver plane");
 
     TransportMap m;
-    m.ot = solve_grid_ot(g, mu, nu, options.ot);
+    m.ot = options.method == TransportMethod::morphing ? solve_morphing(g, mu, nu) : solve_grid_ot(g, mu, nu, options.ot);
     m.report.grid_x = g.nx;
     m.report.grid_y = g.ny;
     m.report.cell_size = cell;
