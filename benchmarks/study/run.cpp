@@ -5,12 +5,15 @@
 //   study_run --scene S.json --engine E --seed N --time-budget SEC --threads T --out R.json
 //             [--case-patch JSON] [--patch JSON] [--label NAME] [--eval-seed N]
 //             [--control N] [--kernel-supports K] [--mesh-scale K] [--rays-scale F]
-//             [--check-render] [--compare-tracers] [--save-images PREFIX]
+//             [--check-render] [--compare-tracers] [--save-images PREFIX] [--start-only]
 //
 // Engines:
 //   design        the library's designer, freeform::design(): ours and every variant of it
 //                 (ablations, full-retrace evaluation, one kernel shape, ...) is a --patch of
-//                 the scene's "optimise"/"surface"/"light" keys
+//                 the scene's "optimise"/"surface"/"light" keys. With --start-only it
+//                 makes the design's start alone (freeform::make_design_start: the
+//                 transport surface for a scene with a target, unless the patch asks for
+//                 another start) with the run's seed, no annealing: "transport-only"
 //   spsa          SPSA on the control grid (spsa.hpp)
 //   pagmo-sa, pagmo-cmaes, pagmo-xnes, pagmo-sade   pagmo2 on the control grid (generic.hpp)
 //   nlopt-bobyqa, nlopt-crs2                        NLopt on the control grid (generic.hpp)
@@ -47,7 +50,7 @@ struct Args {
     int kernel_supports = 0;
     int mesh_scale = 1;
     double rays_scale = 1;
-    bool check_render = false, compare_tracers = false;
+    bool check_render = false, compare_tracers = false, start_only = false;
     std::int64_t progress_every = 200;
     SpsaSettings spsa;
 };
@@ -150,7 +153,25 @@ int run(const Args& a) {
     int trace_levels = 1;
     const auto start = Clock::now();
 
-    if (a.engine == "design") {
+    if (a.engine == "design" && a.start_only) {
+        // The start alone, made as design() makes it (same seed, same threads, same scene),
+        // then judged like every other run below. Its time is the whole solve, fit and the
+        // start's own exact-tracer check (which design() also pays before annealing).
+        DesignStart s = make_design_start(run_scene, io::make_initial_heightmap(run_scene, nx, ny), run_target, a.seed,
+                                          threads);
+        const double seconds = seconds_since(start);
+        s.report.plan = "--start-only: no annealing";
+        out["seconds"] = seconds;
+        out["iterations"] = 0;
+        out["evaluations"] = 0;
+        out["iterations_per_second"] = 0.0;
+        out["start"] = start_report_json(s.report);
+        // One trace point: the start's error and energy as the library measured them (run
+        // seed, final receiver resolution; the objective is not computed there: 0).
+        if (s.report.error >= 0) trace.push_back({seconds, 0, 0, s.report.error, s.report.energy, 0.0});
+        model["start"] = s.report.used;
+        result_surface = std::move(s.surface);
+    } else if (a.engine == "design") {
         DesignOptions o = run_scene.optimise;
         o.seed = a.seed;
         o.time_budget = a.time_budget;
@@ -177,6 +198,7 @@ int run(const Args& a) {
         out["accepted"] = r.accepted;
         out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
         out["stages"] = stage_reports_json(r.stages);
+        out["start"] = start_report_json(r.start);
         out["bandit"] = o.bandit;
         out["evaluation"] = o.evaluation;
         out["kernel_shapes"] = o.kernel_shapes;
@@ -211,8 +233,10 @@ int run(const Args& a) {
                                            {"kernels", json::array()}});
         for (const auto& s : r.stages) model["levels"][std::size_t(s.level)]["kernels"].push_back(s.kernel_support);
         model["rays"] = r.rays;
+        model["start"] = r.start.used;
         result_surface = std::move(r.surface);
     } else {
+        if (a.start_only) throw InputError("--start-only: only with --engine design");
         const auto [cx, cy] = control_grid_for(a.control, nx, ny);
         ControlObjective f(run_scene, run_target, cx, cy, nx, ny, a.seed, a.threads, a.time_budget, start);
         json details;
@@ -322,6 +346,7 @@ int main(int argc, char** argv) {
     app.add_option("--spsa-step", a.spsa.step_cells, "SPSA first step per variable, in shift units (default 2)");
     app.add_flag("--check-render", a.check_render, "also judge on 4x rays with a fresh jitter");
     app.add_flag("--compare-tracers", a.compare_tracers, "also render the result with the Embree tracer");
+    app.add_flag("--start-only", a.start_only, "engine design: make the design's start alone, no annealing");
     app.add_option("--save-images", a.save_images, "write PREFIX-{irradiance,target,heightmap}.pfm");
     app.add_option("--out", a.out, "result JSON file");
     try {

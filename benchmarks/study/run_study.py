@@ -87,7 +87,7 @@ def run_command(binary: Path, run: plan.Run, threads: int, out_file: Path, image
     cmd += list(method.options)
     if method.judged_with_check:
         cmd += ["--check-render"]
-    if method.name == "ours" and run.purpose in ("main", "quick"):
+    if method.name in ("ours", "ours-flat-start") and run.purpose in ("main", "quick"):
         cmd += ["--compare-tracers"]
     if image_prefix is not None:
         cmd += ["--save-images", str(image_prefix)]

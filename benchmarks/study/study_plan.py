@@ -5,6 +5,16 @@ patch that turns them into a stress case; methods are an engine of study_run wit
 of the scene's "optimise"/"surface"/"light" keys and a few driver options. Every variant
 of ours is the library's freeform::design() with such a patch (engine "design"). Everything
 the report says about a method's settings comes from here and from the result files.
+
+The start. Since commit 66d6687 a design starts from the transport surface (surface.initial
+"transport", the default for a scene with a target): "ours" is that default, transport start
++ annealing, and "transport-only" is the start alone (study_run --start-only). Every other
+variant of ours (the ablation ladder, the bandits, the stress, model and evaluation
+variants) was measured with the flat start that was the default before, and keeps it
+explicitly: its patch includes {"surface": {"initial": "flat"}} (FLAT_START), so running it
+again reproduces what is committed; "ours-flat-start" is the former "ours". The baselines
+(SPSA, pagmo2, NLopt) never went through design()'s start: they start from the scene's
+initial heights, which are flat for every case (control_grid.hpp), and are unchanged.
 """
 from __future__ import annotations
 
@@ -42,6 +52,12 @@ class Method:
 
 # --- cases -------------------------------------------------------------------------------
 
+# The lens example before commit 33929ba: a 1 cm thick lens with +-5 mm height bounds. Its
+# transport surface needs about 20 mm of sag range, so the example now allows +-12 mm (and
+# is 1.5 cm thick); the runs of the earlier study were made on this one and are kept as the
+# case "lens-5mm".
+LENS_5MM_PATCH = {"surface": {"material": {"refractive": 1.49, "thickness": 0.01}, "height_bounds": [-0.005, 0.005]}}
+
 # Grazing light on the E case: collimated light at 70 degrees from the mirror's normal,
 # the receiver moved onto the specular direction (0.5 m away, facing the mirror). Rays
 # cross ~27 surface cells inside the height slab, and the reflected beam is 3x narrower.
@@ -69,7 +85,12 @@ CASES = {c.name: c for c in [
     Case("point", "examples/scenes/point-light.json", 12,
          title="letter F, point light 0.3 m from an elliptical 12 x 8 cm mirror (121 x 81 mesh, 240 x 160 px)",
          reference={"energy_threshold": 0.95}),
-    Case("lens", "examples/scenes/lens.json", 12, title="letter L through a PMMA lens (IOR 1.49, 101², 200²)"),
+    Case("lens", "examples/scenes/lens.json", 12,
+         title="letter L through a PMMA lens (IOR 1.49, 1.5 cm thick, ±12 mm height bounds, 101², 200²)"),
+    Case("lens-5mm", "examples/scenes/lens.json", 12, case_patch=LENS_5MM_PATCH,
+         title="the lens example as it was before 33929ba (1 cm thick, ±5 mm height bounds)",
+         stress="the lens with ±5 mm height bounds: the transport surface needs about 20 mm of sag range "
+                "(the runs of earlier passes on 'lens' were made on this scene)"),
     Case("camera", "examples/scenes/camera.json", 40,
          title="grey photograph 'camera' (collimated, mirror, 401² mesh, 200² px)",
          stress="photographic target: every pixel matters, 401² mesh",
@@ -84,6 +105,8 @@ CASES = {c.name: c for c in [
 ]}
 
 PUBLIC_CASES = ["E", "V", "at", "headlight", "point", "lens", "camera"]
+# Where the flat-start runs of the earlier passes were made: the lens case then was lens-5mm.
+LEGACY_CASES = [c if c != "lens" else "lens-5mm" for c in PUBLIC_CASES]
 SIMPLE_CASES = ["E", "V", "at", "headlight", "point", "lens"]  # failure rate 0 expected
 
 # --- methods -----------------------------------------------------------------------------
@@ -95,62 +118,82 @@ PAIR_CAP = 3600.0
 
 _NO_PENALTIES = {"energy_threshold": 0, "sobel_weight": 0, "lost_light_weight": 0}
 
+# The start every variant of ours had before the transport start became the default.
+FLAT_START = {"surface": {"initial": "flat"}}
+
+
+def merged(patch: dict, extra: dict) -> dict:
+    """patch with extra merged in (nested objects merged, extra's keys appended after patch's)."""
+    out = dict(patch)
+    for k, v in extra.items():
+        out[k] = merged(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def flat(patch: dict | None = None) -> dict:
+    return merged(patch or {}, FLAT_START)
+
 METHODS = {m.name: m for m in [
-    Method("ours", "design", "ours: multi-level, 7 kernel shapes + history bandit, Phong, energy/Sobel/lost-light "
-           "terms, incremental evaluation", judged_with_check=True),
+    Method("ours", "design", "ours, the default: transport start (optimal transport surface, surface.initial "
+           "\"transport\"), then annealing (multi-level from the start's error, 7 kernel shapes + history bandit, "
+           "Phong, energy/Sobel/lost-light terms, incremental evaluation)", judged_with_check=True),
+    Method("ours-flat-start", "design", "ours from a flat mirror (surface.initial \"flat\"; the default before "
+           "66d6687, \"ours\" of the earlier passes)", patch=flat(), judged_with_check=True),
+    Method("transport-only", "design", "the transport start alone, no annealing (make_design_start with the run's "
+           "seed)", options=("--start-only",), family="transport", judged_with_check=True),
     # The ablation ladder, from the reference's chapter-3 baseline up to ours.
     Method("sa-plain", "design", "plain SA (reference ch. 3): single-vertex moves, flat triangles, no penalties, "
-           "one level", patch={"optimise": {"single_vertex": True, "multilevel": False, **_NO_PENALTIES},
-                                "surface": {"phong_alpha": 0}}, family="ablation"),
+           "one level", patch=flat({"optimise": {"single_vertex": True, "multilevel": False, **_NO_PENALTIES},
+                                     "surface": {"phong_alpha": 0}}), family="ablation"),
     Method("sa+kernels", "design", "+ Gaussian kernels (7 shapes, picked uniformly at random)",
-           patch={"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES},
-                  "surface": {"phong_alpha": 0}}, family="ablation"),
+           patch=flat({"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES},
+                       "surface": {"phong_alpha": 0}}), family="ablation"),
     Method("sa+kernels+phong", "design", "+ Phong correction (α = 0.75)",
-           patch={"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES}}, family="ablation"),
+           patch=flat({"optimise": {"multilevel": False, "bandit": "uniform", **_NO_PENALTIES}}), family="ablation"),
     Method("sa+kernels+phong+terms", "design", "+ energy threshold 0.95, Sobel term 0.1, lost-light term 1",
-           patch={"optimise": {"multilevel": False, "bandit": "uniform"}}, family="ablation"),
+           patch=flat({"optimise": {"multilevel": False, "bandit": "uniform"}}), family="ablation"),
     Method("ours-uniform", "design", "+ multi-level (kernel shape still uniform at random)",
-           patch={"optimise": {"bandit": "uniform"}}),
-    Method("ours-ucb1", "design", "ours with the UCB1 bandit", patch={"optimise": {"bandit": "ucb1"}}),
+           patch=flat({"optimise": {"bandit": "uniform"}})),
+    Method("ours-ucb1", "design", "ours with the UCB1 bandit", patch=flat({"optimise": {"bandit": "ucb1"}})),
     Method("ours-ducb", "design", "ours with the discounted-UCB bandit",
-           patch={"optimise": {"bandit": "discounted-ucb"}}),
+           patch=flat({"optimise": {"bandit": "discounted-ucb"}})),
     Method("ours-one-kernel", "design", "ours with one kernel shape (isotropic σ = support/4, no pre-process)",
-           patch={"optimise": {"kernel_shapes": "isotropic"}}),
+           patch=flat({"optimise": {"kernel_shapes": "isotropic"}})),
     # Full retraces are slow: sample the trace every 20 moves, not every 200.
     Method("ours-full-eval", "design", "ours judging every proposal by a full retrace of every ray "
-           "(optimise.evaluation \"full\"), same time budget", patch={"optimise": {"evaluation": "full"}},
+           "(optimise.evaluation \"full\"), same time budget", patch=flat({"optimise": {"evaluation": "full"}}),
            options=("--progress-every", "20")),
     Method("ours-no-lost-light", "design", "ours with the reference's objective: no lost-light term "
            "(optimise.lost_light_weight 0; the energy threshold stays)",
-           patch={"optimise": {"lost_light_weight": 0}}, family="ablation"),
+           patch=flat({"optimise": {"lost_light_weight": 0}}), family="ablation"),
     Method("ours-error-guided", "design", "ours with error-guided kernel centres (optimise.error_guided)",
-           patch={"optimise": {"error_guided": True}}, family="ablation"),
+           patch=flat({"optimise": {"error_guided": True}}), family="ablation"),
     Method("ours-single-level", "design", "ours without the multi-level schedule",
-           patch={"optimise": {"multilevel": False}}),
-    Method("ours-flat", "design", "ours with flat triangles (Phong α = 0)", patch={"surface": {"phong_alpha": 0}}),
+           patch=flat({"optimise": {"multilevel": False}})),
+    Method("ours-flat", "design", "ours with flat triangles (Phong α = 0)", patch=flat({"surface": {"phong_alpha": 0}})),
     # Stress variants of ours.
     Method("ours-tiny-kernels", "design", "ours with 3 x 3 kernels only, on every level",
-           options=("--kernel-supports", "3"), family="stress"),
+           patch=flat(), options=("--kernel-supports", "3"), family="stress"),
     Method("ours-no-energy", "design", "ours without energy terms (no eq. 4.4 threshold, no lost-light term)",
-           patch={"optimise": {"energy_threshold": 0, "lost_light_weight": 0}}, family="stress"),
+           patch=flat({"optimise": {"energy_threshold": 0, "lost_light_weight": 0}}), family="stress"),
     # "No more than a scene needs": larger models than the scene chose.
     Method("ours-mesh2x", "design", "ours on a final mesh with twice the vertices per side",
-           options=("--mesh-scale", "2"), family="model", judged_with_check=True),
+           patch=flat(), options=("--mesh-scale", "2"), family="model", judged_with_check=True),
     Method("ours-rays4x", "design", "ours with 4x the rays on the final level",
-           options=("--rays-scale", "4"), family="model", judged_with_check=True),
+           patch=flat(), options=("--rays-scale", "4"), family="model", judged_with_check=True),
     # Full against incremental evaluation at a fixed iteration count, same seed: the two must
     # end with the same heights bit for bit (the incremental objective is exact), so the
     # ratio of their speeds is the speed-up of incremental evaluation at equal work. The
     # repeat runs the incremental design again: a fixed iteration count must make a design
     # reproducible, or the comparison means nothing.
     Method("ours-fixed", "design", f"ours stopped after {PAIR_ITERATIONS} iterations, incremental evaluation",
-           patch={"optimise": {"max_iterations": PAIR_ITERATIONS}}, options=("--progress-every", "20"),
+           patch=flat({"optimise": {"max_iterations": PAIR_ITERATIONS}}), options=("--progress-every", "20"),
            family="evaluation", time_cap=PAIR_CAP, expected={"headlight": 3.5, "E": 6.5}),
     Method("ours-fixed-repeat", "design", "ours-fixed again (same seed): is the design reproducible?",
-           patch={"optimise": {"max_iterations": PAIR_ITERATIONS}}, options=("--progress-every", "20"),
+           patch=flat({"optimise": {"max_iterations": PAIR_ITERATIONS}}), options=("--progress-every", "20"),
            family="evaluation", time_cap=PAIR_CAP, expected={"headlight": 3.5, "E": 6.5}),
     Method("ours-full-eval-fixed", "design", f"ours stopped after {PAIR_ITERATIONS} iterations, every proposal "
-           "judged by a full retrace", patch={"optimise": {"max_iterations": PAIR_ITERATIONS, "evaluation": "full"}},
+           "judged by a full retrace", patch=flat({"optimise": {"max_iterations": PAIR_ITERATIONS, "evaluation": "full"}}),
            options=("--progress-every", "20"), family="evaluation", time_cap=PAIR_CAP,
            expected={"headlight": 8.5, "E": 115}),
     # Baselines on the same tracer and objective (control grid, see control_grid.hpp).
@@ -168,8 +211,26 @@ METHODS = {m.name: m for m in [
     Method("nlopt-crs2", "nlopt-crs2", "NLopt CRS2-LM, 13² control grid", family="baseline"),
 ]}
 
-ABLATION_LADDER = ["sa-plain", "sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform", "ours"]
-OURS_FAMILY = ["ours", "ours-uniform", "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-single-level"]
+ABLATION_LADDER = ["sa-plain", "sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform",
+                   "ours-flat-start", "ours"]
+# "Our best method" on a case, for the failure threshold: the best of these.
+OURS_FAMILY = ["ours", "ours-flat-start", "ours-uniform", "ours-ucb1", "ours-ducb", "ours-one-kernel",
+               "ours-single-level"]
+# What the variants of ours (all from a flat start) are compared with in the report.
+FLAT_REFERENCE = "ours-flat-start"
+# The start, with and without annealing, shown next to each other everywhere.
+START_METHODS = ["ours", "ours-flat-start", "transport-only"]
+
+# Issue 9's goals (measured at exactly its budgets, the "goals" runs): case -> (seconds,
+# method, error at most, energy at least or None).
+ISSUE9_GOALS = [
+    ("E", 20.0, "ours", 0.06, 0.97),
+    ("E", None, "transport-only", 0.15, None),
+    ("headlight", 5.0, "ours", 0.04, None),
+    ("camera", 60.0, "ours", 0.10, None),
+    ("point", 20.0, "ours", 0.15, None),
+    ("lens", 20.0, "ours", 0.15, None),
+]
 MAIN_BASELINES = ["sa-plain", "spsa", "pagmo-sa", "pagmo-cmaes", "nlopt-bobyqa"]
 
 
@@ -216,7 +277,14 @@ SEEDS = list(range(101, 111))   # never the cases' own seed (1), which judges ev
 
 def full_plan() -> list[Run]:
     runs = []
-    runs += _grid(PUBLIC_CASES, ["ours"] + MAIN_BASELINES, SEEDS, "main", save_first=True)
+    # The default (transport start + annealing) and the start alone on every case.
+    runs += _grid(PUBLIC_CASES, ["ours", "transport-only"], SEEDS, "main", save_first=True)
+    # Flat starts: ours as it was, and the baselines. On the lens, the earlier passes ran on
+    # lens-5mm (the example's former bounds): there they are complete, and ours and the
+    # transport start are added; on the current lens they are planned again.
+    runs += _grid(PUBLIC_CASES, ["ours-flat-start"] + MAIN_BASELINES, SEEDS, "main", save_first=True)
+    runs += _grid(["lens-5mm"], ["ours-flat-start"] + MAIN_BASELINES + ["ours", "transport-only"], SEEDS, "main",
+                  save_first=True)
     runs += _grid(["E", "headlight"], ["sa+kernels", "sa+kernels+phong", "sa+kernels+phong+terms", "ours-uniform",
                                        "ours-ucb1", "ours-ducb", "ours-one-kernel", "ours-full-eval",
                                        "ours-single-level", "ours-flat", "ours-no-lost-light", "ours-error-guided"], SEEDS,
@@ -224,25 +292,36 @@ def full_plan() -> list[Run]:
     runs += evaluation_pairs(["headlight", "E"], SEEDS[:3], "evaluation")
     runs += _grid(["headlight"], ["pagmo-xnes", "pagmo-sade", "nlopt-crs2"], SEEDS, "extra")
     runs += _grid(["E"], ["spsa-fullmesh"], SEEDS, "extra")
-    runs += _grid(["point-low"], ["ours", "ours-no-energy", "ours-no-lost-light", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS,
+    runs += _grid(["point-low"], ["ours-flat-start", "ours", "transport-only", "ours-no-energy", "ours-no-lost-light", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS,
                   "stress")
-    runs += _grid(["grazing"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS, "stress")
+    runs += _grid(["grazing"], ["ours-flat-start", "ours", "transport-only", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], SEEDS, "stress")
     runs += _grid(["E", "headlight", "point"], ["ours-tiny-kernels"], SEEDS, "stress")
     runs += _grid(["E", "point"], ["ours-no-energy"], SEEDS, "stress")
     runs += _grid(["point"], ["ours-no-lost-light"], SEEDS, "stress")
     runs += _grid(["E", "headlight"], ["spsa-few-rays"], SEEDS, "stress")
-    # Our error against time budget: final errors at B/4, B/2 (B: 10 seeds above) and 4 B.
+    # Our error against time budget (flat start, earlier passes): final errors at B/4, B/2
+    # (B: 10 seeds above) and 4 B.
     for scale in (0.25, 0.5, 4.0):
-        runs += _grid(PUBLIC_CASES, ["ours"], SEEDS[:3], "ladder", budget_scale=scale)
-    runs += _grid([c for c in PUBLIC_CASES if c != "camera"], ["ours-mesh2x"], SEEDS[:5], "model")
-    runs += _grid(PUBLIC_CASES, ["ours-rays4x"], SEEDS[:5], "model")
+        runs += _grid(LEGACY_CASES, ["ours-flat-start"], SEEDS[:3], "ladder", budget_scale=scale)
+    runs += _grid([c for c in LEGACY_CASES if c != "camera"], ["ours-mesh2x"], SEEDS[:5], "model")
+    runs += _grid(LEGACY_CASES, ["ours-rays4x"], SEEDS[:5], "model")
+    runs += goal_runs(SEEDS)
     return _unique(runs)
+
+
+def goal_runs(seeds) -> list[Run]:
+    """Issue 9's goals at exactly its budgets (ours; the transport start has no budget)."""
+    runs = []
+    for case, budget, method, _, _ in ISSUE9_GOALS:
+        if budget is not None:
+            runs += [Run(case, method, s, budget, "goals") for s in seeds]
+    return runs
 
 
 def quick_plan() -> list[Run]:
     seeds = SEEDS[:3]
-    runs = _grid(["E", "headlight"], ["ours", "sa-plain", "spsa", "pagmo-cmaes", "nlopt-bobyqa"], seeds, "quick",
-                 quick=True, save_first=True)
+    runs = _grid(["E", "headlight"], ["ours", "ours-flat-start", "transport-only", "sa-plain", "spsa", "pagmo-cmaes",
+                                      "nlopt-bobyqa"], seeds, "quick", quick=True, save_first=True)
     runs += _grid(["E", "headlight"], ["ours-no-lost-light"], seeds, "quick", quick=True)
     runs += _grid(["headlight"], ["ours-one-kernel", "ours-full-eval", "pagmo-sa"], seeds, "quick", quick=True)
     # The full-retrace pair on E takes two minutes: only in the full plan.
