@@ -231,11 +231,20 @@ int run_render(const RenderArgs& a) {
     std::optional<ImageD> target;
     if (scene.target) target = io::load_target_image(scene);
     Heightmap surface;
+    std::optional<StartReport> start;
     if (!a.heightmap.empty()) {
         surface = heightmap_from_pfm(scene, a.heightmap);
     } else {
         const auto [nx, ny] = final_mesh(scene, target ? &*target : nullptr);
         surface = io::make_initial_heightmap(scene, nx, ny);
+        // The scene's start, as a design would begin: the transport surface by default.
+        if (target && starts_from_transport(scene) && scene.meshes.empty()) {
+            if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, surface);
+            DesignStart st = make_design_start(scene, std::move(surface), *target, scene.optimise.seed,
+                                               thread_count(exec::omp_t{a.threads}));
+            start = st.report;
+            surface = std::move(st.surface);
+        }
     }
     std::optional<TriangleMesh> mesh;
     if (!a.mesh.empty()) mesh = io::read_obj(a.mesh);
@@ -284,6 +293,7 @@ int run_render(const RenderArgs& a) {
         t = make_target(*target, scene.receiver.width, scene.receiver.height, rays.total);
         m["error"] = l1_error(r.histogram, *t);
     }
+    if (start) m["start"] = start_report_json(*start);
     m["effective_scene"] = scene_to_json(scene);
 
     fs::create_directories(a.out);
@@ -296,6 +306,8 @@ int run_render(const RenderArgs& a) {
     std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
                 r.totals.energy(), t ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
                 m["rays_per_second"].get<double>() / 1e6);
+    if (start)
+        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", start->used.c_str(), start->flat_error);
     std::printf("  results in %s/\n", a.out.string().c_str());
     return 0;
 }
