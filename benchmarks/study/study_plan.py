@@ -140,7 +140,7 @@ METHODS = {m.name: m for m in [
     Method("ours-flat-start", "design", "ours from a flat mirror (surface.initial \"flat\"; the default before "
            "66d6687, \"ours\" of the earlier passes)", patch=flat(), judged_with_check=True),
     Method("transport-only", "design", "the transport start alone, no annealing (make_design_start with the run's "
-           "seed)", options=("--start-only",), family="transport", judged_with_check=True),
+           "seed)", options=("--start-only",), family="transport", judged_with_check=True, expected={"camera": 4.0}),
     # The ablation ladder, from the reference's chapter-3 baseline up to ours.
     Method("sa-plain", "design", "plain SA (reference ch. 3): single-vertex moves, flat triangles, no penalties, "
            "one level", patch=flat({"optimise": {"single_vertex": True, "multilevel": False, **_NO_PENALTIES},
@@ -263,6 +263,8 @@ def _grid(cases, methods, seeds, purpose, budget_scale=1.0, quick=False, save_fi
 def expected_seconds(run: Run) -> float:
     """The optimisation time a run is expected to take (start-up and renders not included)."""
     m = METHODS[run.method]
+    if m.family == "transport":  # the start alone: no budget to spend (about 1 s; the camera's 401² fit more)
+        return m.expected.get(run.case, 1.0)
     return m.expected.get(run.case, run.budget) if m.time_cap else run.budget
 
 
