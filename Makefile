@@ -1,10 +1,13 @@
 # Entry points for people and CI. The real build is CMake (see CMakePresets.json).
 #   make demo           install dependencies, build, run the demo (results in results/demo)
 #   make test           release build + all tests
+#   make test-clang     Release build with Debian's clang + tests (build/clang; CI runs it)
 #   make test-sanitize  AddressSanitizer/UBSan build + tests
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
 #                         (the full study reuses the runs in benchmarks/results/runs, the committed
 #                         ones included; STUDY_ARGS=--fresh measures every run again)
+# The presets set FREEFORM_WERROR=ON, so warnings are errors in every build made here and in
+# CI; a plain `cmake -B build` leaves it OFF (warnings stay warnings for users' compilers).
 JOBS ?= $(shell nproc)
 BUILD := build/release
 BIN := $(BUILD)/bin
@@ -21,7 +24,7 @@ FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o 
 # Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.
 .NOTPARALLEL:
 
-.PHONY: all deps deps-bench configure build demo test test-sanitize bench clean format
+.PHONY: all deps deps-bench deps-clang configure build demo test test-clang test-sanitize bench clean format
 
 all: build
 
@@ -30,6 +33,9 @@ deps:
 
 deps-bench:
 	@scripts/install-deps.sh bench
+
+deps-clang:
+	@scripts/install-deps.sh clang
 
 configure:
 	cmake --preset release
@@ -45,6 +51,12 @@ demo: deps configure
 
 test: deps build
 	ctest --preset release
+
+# clang++ at -O3, no benchmarks (see the "clang" preset).
+test-clang: deps deps-clang
+	cmake --preset clang
+	cmake --build --preset clang --parallel $(JOBS)
+	ctest --preset clang
 
 test-sanitize: deps
 	cmake --preset sanitize

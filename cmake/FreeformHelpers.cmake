@@ -1,6 +1,6 @@
 # Helpers that give every test, example and benchmark of the project the same setup:
-# the library (and freeform::embree when it exists), warnings as errors, and a common
-# output place. Only the project's own targets use them; nothing here is installed.
+# the library (and freeform::embree when it exists), warnings (errors with FREEFORM_WERROR)
+# and a common output place. Only the project's own targets use them; nothing here is installed.
 include_guard(GLOBAL)
 
 # Settings shared by all of the project's executables.

@@ -2,6 +2,7 @@
 # Installs the Debian 12 packages freeform needs, and only those that are missing.
 #   scripts/install-deps.sh          build, test and demo dependencies
 #   scripts/install-deps.sh bench    also the optimisers the benchmark studies compare against
+#   scripts/install-deps.sh clang    also Debian's clang (make test-clang; libomp-dev is in the base list)
 # Silent when everything is already installed; safe to run any number of times.
 set -euo pipefail
 
@@ -14,12 +15,13 @@ packages=(
 for arg in "$@"; do
     case "$arg" in
         bench) packages+=(libpagmo-dev libnlopt-cxx-dev) ;;
+        clang) packages+=(clang) ;;
         -h | --help)
-            sed -n '2,5p' "$0" | sed 's/^# \{0,1\}//'
+            sed -n '2,6p' "$0" | sed 's/^# \{0,1\}//'
             exit 0
             ;;
         *)
-            echo "install-deps.sh: unknown argument '$arg' (expected: bench)" >&2
+            echo "install-deps.sh: unknown argument '$arg' (expected: bench, clang)" >&2
             exit 2
             ;;
     esac

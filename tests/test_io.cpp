@@ -192,7 +192,10 @@ TEST_CASE("PFM reader rejects missing, corrupt and truncated files with the file
                         float_bytes(1, true)},
         {"empty.pfm", ""},
     };
-    for (const auto& [name, bytes] : cases) {
+    for (const auto& c : cases) {
+        // Variables, not a structured binding: clang < 16 cannot capture a binding in a lambda.
+        const std::string& name = c.first;
+        const std::string& bytes = c.second;
         CAPTURE(name);
         write_raw(dir / name, bytes);
         const std::string message = io_error_message([&] { (void)io::read_pfm(dir / name); });
@@ -420,7 +423,11 @@ TEST_CASE("OBJ reader errors name the file and the line") {
         {"bad_ref.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2/x/ 3\n", "line 4"},
         {"nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "line 2"},
     };
-    for (const auto& [name, text, line] : cases) {
+    for (const auto& c : cases) {
+        // Variables, not a structured binding: clang < 16 cannot capture a binding in a lambda.
+        const std::string& name = std::get<0>(c);
+        const std::string& text = std::get<1>(c);
+        const std::string& line = std::get<2>(c);
         CAPTURE(name);
         write_raw(dir / name, text);
         const std::string message = io_error_message([&] { (void)io::read_obj(dir / name); });
