@@ -302,3 +302,28 @@ TEST_CASE("mesh morphing (the alternative): conserves mass and drives the densit
     CHECK(r.residual < 0.5 * r.residual_history.front());
     CHECK(r.residual < 0.1);
 }
+
+#if defined(_OPENMP)
+#include <omp.h>
+
+TEST_CASE("grid OT: the same potentials whatever the number of threads Eigen's products use") {
+    // Eigen splits a matrix product's rows and columns among OpenMP threads, never a sum:
+    // the Poisson solves, and with them the whole solve, must not depend on the count.
+    const int n = 96;
+    const OtGrid g = unit_grid(n);
+    Eigen::ArrayXXd src(n, n), dst = Eigen::ArrayXXd::Zero(n, n);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            src(j, i) = 1.0 + 0.5 * std::sin(0.1 * i) * std::cos(0.07 * j);
+            if ((i / 12 + j / 12) % 2 == 0) dst(j, i) = 1.0;
+        }
+    const int before = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const OtResult one = solve_grid_ot(g, src, dst);
+    omp_set_num_threads(4);
+    const OtResult four = solve_grid_ot(g, src, dst);
+    omp_set_num_threads(before);
+    CHECK((one.psi == four.psi).all());
+    CHECK(one.iterations == four.iterations);
+}
+#endif

@@ -117,7 +117,9 @@ struct OtResult {
 // where −Δ is the 5-point graph Laplacian (row p: Σ over grid neighbours q of
 // (u_p − u_q)/h²), by its eigenbasis: the cosines cos(πk(i + ½)/n) of each axis. Two
 // small dense products per axis (Eigen), exact up to rounding; the solution has zero
-// mean (the constant is the null space).
+// mean (the constant is the null space). Eigen may run a product on several OpenMP
+// threads, but splits only rows and columns, never a sum: the result does not depend on
+// the thread count (tested).
 class NeumannPoisson {
 public:
     NeumannPoisson(int nx, int ny, double hx, double hy) {
