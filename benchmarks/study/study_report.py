@@ -835,10 +835,19 @@ def start_section(st: Study) -> str:
                          f"{ours_start_s:.2f}" if not math.isnan(ours_start_s) else "–"])
     if not rows:
         return "_Not run._"
+    gains = []
+    for c in cases:
+        o, t = st.stats(c, "ours"), st.stats(c, "transport-only")
+        if o and t and t["median"] > 0:
+            gains.append(f"{c} {100 * (t['median'] - o['median']) / t['median']:+.0f} %")
     out = ["Final error, median (min–max, seeds) at the case's budget, judged alike; energy median. `transport-only` "
            "takes no budget (its time is in the second table).", "",
            table(["case", "budget", "ours (transport + annealing)", "ours-flat-start", "transport-only",
                   "energy: transport-only", "energy: ours"], rows)]
+    if gains:
+        out += ["", "What the annealing adds to the start (median error of the start alone minus ours, relative to the "
+                "start's; negative: the annealed design is worse than its start) at the case's budget, of which the "
+                "start itself takes part (last table): " + "; ".join(gains) + "."]
     if info:
         out += ["", "The start as the library made it (`start` in each run's JSON; medians over the transport-only "
                 "runs): how many seeds used the transport surface (else it fell back to flat), the transport grid, "
