@@ -121,8 +121,16 @@ TEST_CASE("k = 1, alpha = 0 reproduces the grid and the tracer's triangles") {
             CHECK(p.x == hm.u_of(i));
             CHECK(p.y == hm.v_of(j));
             CHECK(p.z == double(hm(i, j)));
+            // alpha = 0: the stored normal is the facet normal of the triangle the vertex
+            // is taken from: in the cell to its upper right (the last one at the far
+            // borders), triangle 0 (v00, v10, v11) unless the vertex is that cell's v01.
+            const int ci = std::min(i, 5), cj = std::min(j, 3);
+            const bool upper = j > cj && i == ci;
+            const Vec3d a{hm.u_of(ci), hm.v_of(cj), double(hm(ci, cj))},
+                b{hm.u_of(ci + 1), hm.v_of(upper ? cj + 1 : cj), double(hm(ci + 1, upper ? cj + 1 : cj))},
+                c{hm.u_of(upper ? ci : ci + 1), hm.v_of(cj + 1), double(hm(upper ? ci : ci + 1, cj + 1))};
             const Vec3d n = m.normals[std::size_t(j) * 7 + i];
-            CHECK(length(n - Vec3d(hm.normals()[std::size_t(j) * 7 + i])) < 1e-7);
+            CHECK(length(n - normalize(cross(b - a, c - a))) < 1e-12);
         }
     // Triangle t of the mesh is triangle t of the tracer (same vertices, same order).
     for (std::int32_t t = 0; t < std::int32_t(m.triangles.size()); ++t) {
@@ -167,8 +175,12 @@ TEST_CASE("k = 4: shared-vertex grid, no duplicates, an oriented open sheet") {
 }
 
 TEST_CASE("points on shared edges get the same position from either side, bit for bit") {
+    // The patches meet without cracks; their normals meet with a small kink (Phong
+    // patches are continuous, not smooth, across edges), which the tracers simulate.
     const Heightmap hm = wavy(6, 5);
     const double alpha = 0.75;
+    double kink = 0;
+    const auto angle = [](Vec3d a, Vec3d b) { return std::atan2(length(cross(a, b)), dot(a, b)); };
     for (int cj = 0; cj + 1 < hm.ny(); ++cj)
         for (int ci = 0; ci + 1 < hm.nx(); ++ci) {
             const std::int32_t base = 2 * (cj * (hm.nx() - 1) + ci);
@@ -178,21 +190,31 @@ TEST_CASE("points on shared edges get the same position from either side, bit fo
                 const PhongVertex d0 = phong_vertex(hm, base, 1 - t, 0, t, alpha);
                 const PhongVertex d1 = phong_vertex(hm, base + 1, 1 - t, t, 0, alpha);
                 CHECK(d0.position == d1.position);
-                CHECK(d0.normal == d1.normal);
+                kink = std::max(kink, angle(d0.normal, d1.normal));
                 if (ci + 2 < hm.nx()) {  // the side shared with the cell to the right
                     const PhongVertex a = phong_vertex_in_cell(hm, ci, cj, 1.0, t, alpha);
                     const PhongVertex b = phong_vertex_in_cell(hm, ci + 1, cj, 0.0, t, alpha);
                     CHECK(a.position == b.position);
-                    CHECK(a.normal == b.normal);
+                    kink = std::max(kink, angle(a.normal, b.normal));
                 }
                 if (cj + 2 < hm.ny()) {  // the side shared with the cell above
                     const PhongVertex a = phong_vertex_in_cell(hm, ci, cj, t, 1.0, alpha);
                     const PhongVertex b = phong_vertex_in_cell(hm, ci, cj + 1, t, 0.0, alpha);
                     CHECK(a.position == b.position);
-                    CHECK(a.normal == b.normal);
+                    kink = std::max(kink, angle(a.normal, b.normal));
                 }
             }
         }
+    MESSAGE("largest normal kink across an edge: ", kink, " rad");
+    // Smaller than the turn of the vertex normals from one vertex to the next.
+    double turn = 0;
+    for (int j = 0; j < hm.ny(); ++j)
+        for (int i = 0; i + 1 < hm.nx(); ++i)
+            turn = std::max(turn, angle(Vec3d(hm.normals()[std::size_t(j) * hm.nx() + i]),
+                                        Vec3d(hm.normals()[std::size_t(j) * hm.nx() + i + 1])));
+    MESSAGE("largest turn of the vertex normals between neighbours: ", turn, " rad");
+    CHECK(kink > 0);
+    CHECK(kink < turn);
 }
 
 TEST_CASE("phong_vertex is phong_point up to float rounding") {
@@ -212,14 +234,14 @@ TEST_CASE("phong_vertex is phong_point up to float rounding") {
         fill_hit_vertices(view, hit);
         const Vec3 flat = hit.b0 * hit.p[0] + hit.b1 * hit.p[1] + hit.b2 * hit.p[2];
         const Vec3d pf = Vec3d(phong_point(hit, flat, 0.75f));
-        const Vec3d nf = Vec3d(shading_normal(hit));
+        const Vec3d nf = Vec3d(normalize(patch_normal(hit, flat, 0.75f)));
         const PhongVertex pd = phong_vertex(hm, tri, double(hit.b0), double(hit.b1), double(hit.b2), 0.75);
         worst_p = std::max(worst_p, length(pd.position - pf));
         worst_n = std::max(worst_n, length(pd.normal - nf));
     }
     MESSAGE("phong_vertex vs phong_point: position ", worst_p, " m, normal ", worst_n);
     CHECK(worst_p < 2e-8);  // a few float ulps of 0.05 m coordinates
-    CHECK(worst_n < 1e-6);
+    CHECK(worst_n < 1e-5);  // the normal's formula has more float rounding than the position
 }
 
 TEST_CASE("Phong-corrected tracer hits lie on the fine tessellated mesh") {

@@ -1,6 +1,6 @@
 // The `freeform` command line: render a scene, or design its surface.
 //
-//   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj] [--tracer T] [--threads N]
+//   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj [--mesh-normals]] [--tracer T] [--threads N]
 //   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
 //
 // Bad input (a scene key, a file, an option) prints one line on stderr and exits with 2;
@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include <freeform/design/designer.hpp>
+#include <freeform/design/fabrication.hpp>
 #include <freeform/design/report_json.hpp>
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>
@@ -34,6 +35,7 @@
 #include <freeform/trace/select.hpp>
 #include <freeform/trace/setup.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
+#include <freeform/design/exported.hpp>
 #include <freeform/trace/embree.hpp>
 #endif
 
@@ -169,11 +171,12 @@ json totals_json(const TraceTotals& t) {
     return j;
 }
 
-double l1_error(const Histogram& h, const Target& t) {
+double l1_error(std::span<const Fixed> a, std::span<const Fixed> b, Fixed total) {
     std::int64_t s = 0;
-    for (std::size_t k = 0; k < h.cells.size(); ++k) s += std::llabs(h.cells[k] - t.cells[k]);
-    return double(s) / (2.0 * double(t.total));
+    for (std::size_t k = 0; k < a.size(); ++k) s += std::llabs(a[k] - b[k]);
+    return double(s) / (2.0 * double(total));
 }
+double l1_error(const Histogram& h, const Target& t) { return l1_error(h.cells, t.cells, t.total); }
 
 ImageD target_image_of(const Target& t) {
     ImageD img(t.height, t.width);
@@ -217,6 +220,7 @@ struct RenderArgs {
     std::string tracer;
     int threads = 0;
     std::optional<std::int64_t> seed;
+    bool mesh_normals = false;
 };
 
 int run_render(const RenderArgs& a) {
@@ -237,8 +241,9 @@ int run_render(const RenderArgs& a) {
     } else {
         const auto [nx, ny] = final_mesh(scene, target ? &*target : nullptr);
         surface = io::make_initial_heightmap(scene, nx, ny);
-        // The scene's start, as a design would begin: the transport surface by default.
-        if (target && starts_from_transport(scene) && scene.meshes.empty()) {
+        // The scene's start, as a design would begin: the transport surface by default
+        // (not needed when a mesh replaces the surface: the grid only places the rays).
+        if (target && a.mesh.empty() && starts_from_transport(scene) && scene.meshes.empty()) {
             if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, surface);
             DesignStart st = make_design_start(scene, std::move(surface), *target, scene.optimise.seed,
                                                thread_count(exec::omp_t{a.threads}));
@@ -252,7 +257,12 @@ int run_render(const RenderArgs& a) {
     for (const auto& m : scene.meshes) extra.push_back(io::read_obj(m.file));
 
     const RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
-    const PathParams pp = make_path_params(scene);
+    if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
+        throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
+    PathParams pp = make_path_params(scene);
+    // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
+    if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
+    pp.interpolated_normals = a.mesh_normals;
     const int threads = thread_count(exec::omp_t{a.threads});
     StatusLine status(true);
     RenderOutcome r;
@@ -287,6 +297,8 @@ int run_render(const RenderArgs& a) {
     m["rays_per_second"] = r.seconds > 0 ? double(rays.size()) / r.seconds : 0.0;
     m["mesh"] = json::array({surface.nx(), surface.ny()});
     m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
+    if (mesh || !scene.meshes.empty())
+        m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
     const ImageD irradiance = r.histogram.to_image();
     std::optional<Target> t;
     if (target) {
@@ -426,11 +438,32 @@ int run_design(const DesignArgs& a) {
 
     const ImageD irradiance = hist.to_image();
     const ImageD target_img = target_image_of(t);
-    const bool lens = is_lens(scene.surface.material);
-    const TriangleMesh fab = lens ? lens_solid(result.surface, std::get<Lens>(scene.surface.material),
-                                               float(scene.surface.phong_alpha), options.export_subdivisions)
-                                  : tessellate_surface(result.surface, float(scene.surface.phong_alpha),
-                                                       options.export_subdivisions);
+    // The exported part, and what it does when traced as its flat facets.
+    if (!a.quiet) status.show("exporting the surface and tracing the exported mesh");
+    const Fabrication fabrication = make_fabrication(scene, result.surface);
+    const TriangleMesh& fab = fabrication.mesh;
+    json exported;
+    exported["subdivisions"] = fabrication.subdivisions;
+    exported["subdivisions_chosen"] = fabrication.automatic ? "auto (export_tolerance)" : "export_subdivisions";
+    exported["facet_normal_error_mrad"] = fabrication.normal_error * 1e3;
+    exported["facet_normal_tolerance_mrad"] = fabrication.normal_tolerance * 1e3;
+    exported["triangles"] = fab.triangles.size();
+    std::optional<double> error_exported;
+#if defined(FREEFORM_WITH_EMBREE)
+    {
+        const ExportedTrace et =
+            trace_exported(exec::omp_t{options.threads}, scene, result.surface, fabrication.subdivisions, rays);
+        error_exported = l1_error(et.histogram, t);
+        m["error_exported"] = *error_exported;
+        m["energy_exported"] = et.totals.energy();
+        exported["l1_to_design_irradiance"] = l1_error(et.histogram.cells, hist.cells, rays.total);
+    }
+#else
+    m["error_exported"] = nullptr;
+    exported["not_traced"] = "built without Embree";
+#endif
+    status.finish();
+    m["export"] = exported;
     ImageF heights(result.surface.ny(), result.surface.nx());
     for (int j = 0; j < result.surface.ny(); ++j)
         for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);
@@ -450,6 +483,10 @@ int run_design(const DesignArgs& a) {
                     result.stopped_early ? "interrupted" : "done", error, totals.energy(),
                     (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                     result.stopped_early ? " -- best result so far written" : "");
+        if (error_exported)
+            std::printf("  exported mesh (%zu triangles, %d x %d facets per cell) traced as flat triangles: error "
+                        "%.4f\n",
+                        fab.triangles.size(), fabrication.subdivisions, fabrication.subdivisions, *error_exported);
         const StartReport& st = result.start;
         std::printf("  start: %s%s%s", st.used.c_str(),
                     st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
@@ -483,6 +520,9 @@ int main(int argc, char** argv) {
     render->add_option("--out", ra.out, "output directory (irradiance.pfm/.png, metrics.json)")->required();
     render->add_option("--heightmap", ra.heightmap, "trace this heightmap (PFM, surface frame heights in metres)");
     render->add_option("--mesh", ra.mesh, "trace this triangle mesh (OBJ, world coordinates) in place of the surface");
+    render->add_flag("--mesh-normals", ra.mesh_normals,
+                     "shade meshes with their interpolated vertex normals (Phong), as some renderers do; not "
+                     "physical: a milled part has only its geometry, which is what is traced by default");
     render->add_option("--tracer", ra.tracer, "auto (default), heightfield or embree");
     render->add_option("--threads", ra.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
     render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)")

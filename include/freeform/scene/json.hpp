@@ -776,9 +776,22 @@ inline std::span<const OptimiseKey> optimise_keys() {
          [](const OptimiseSpec& o, json& j) { j["smooth_iterations"] = o.smooth_iterations; }},
         {"export_subdivisions",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.export_subdivisions = int(integer(v, p, 1, 64));
+             if (v.is_string() && v.get<std::string>() == "auto")
+                 o.export_subdivisions = 0;
+             else if (v.is_number_integer())
+                 o.export_subdivisions = int(integer(v, p, 1, 64));
+             else
+                 throw error(p, "expected \"auto\" or a subdivision level from 1 to 64, got " + describe(v));
          },
-         [](const OptimiseSpec& o, json& j) { j["export_subdivisions"] = o.export_subdivisions; }},
+         [](const OptimiseSpec& o, json& j) {
+             if (o.export_subdivisions <= 0)
+                 j["export_subdivisions"] = "auto";
+             else
+                 j["export_subdivisions"] = o.export_subdivisions;
+         }},
+        {"export_tolerance",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.export_tolerance = number_in(v, p, 0.01, 10); },
+         [](const OptimiseSpec& o, json& j) { j["export_tolerance"] = o.export_tolerance; }},
     };
     return table;
 }

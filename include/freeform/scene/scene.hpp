@@ -30,7 +30,10 @@ struct SurfaceSpec {
     double h_min = -0.005, h_max = 0.005;
     Aperture aperture = Aperture::rect;
     Material material = Mirror{};
-    double phong_alpha = 0.75;  // Phong tessellation shape factor; 0 = flat triangles
+    // Phong tessellation shape factor; 0 = flat triangles. 1/2 reproduces a quadratic
+    // height field exactly from its vertices and central-difference normals (the edge
+    // offset is 2α·c·t(1−t)L² against the parabola's c·t(1−t)L²): README "What gets milled".
+    double phong_alpha = 0.5;
     // Initial shape: a PFM heightmap, a paraboloid, or else `initial_shape`.
     InitialShape initial_shape = InitialShape::automatic;
     std::filesystem::path initial_pfm;
@@ -112,7 +115,9 @@ struct OptimiseSpec {
 
     // Output.
     int smooth_iterations = 0;        // post-processing passes of smooth_heights
-    int export_subdivisions = 4;      // Phong tessellation level of the exported mesh
+    int export_subdivisions = 0;      // tessellation level k of the exported mesh; 0 = "auto"
+    double export_tolerance = 0.25;   // "auto": light of a facet lands within this many receiver
+                                      // cells of where the simulated patch sends it
     std::int64_t progress_every = 2000;
 };
 

@@ -8,8 +8,12 @@
 // with barycentric weights (1-a, a-b, b), and in triangle 1 (v00, v11, v01) otherwise,
 // with weights (1-b, a, b-a): the layout and the weights of find_heightfield_hit. The
 // sub-vertex is placed by the Phong formula of phong_point (trace/path.hpp) and gets the
-// normalised barycentric blend of the vertex normals (shading_normal). Sub-cells use the
+// normal of the curved patch there (patch_normal). Sub-cells use the
 // same diagonal direction as the cells, so each sub-triangle lies over one flat triangle.
+// The stored vertex normal is the patch's true normal (patch_normal) for viewers; the
+// geometry alone is what the tracers simulate: the tessellation's flat facets approach
+// the patches as k grows, and subdivisions_for_tolerance picks k from a bound on the
+// angle between the facets and the patches' normals.
 //
 // The formula is evaluated in double with the nominal grid positions (Heightmap::u_of,
 // v_of), not in the float arithmetic of the kernels: the outline of the mesh is then the
@@ -32,6 +36,7 @@
 #include "../core/math.hpp"
 #include "../scene/frame.hpp"
 #include "../scene/material.hpp"
+#include "../trace/path.hpp"
 #include "heightmap.hpp"
 #include "triangle_mesh.hpp"
 
@@ -40,7 +45,7 @@ namespace freeform {
 // A point of the Phong-tessellated surface, in the surface frame.
 struct PhongVertex {
     Vec3d position;
-    Vec3d normal;  // unit
+    Vec3d normal;  // unit: the patch's own normal there (patch_normal of trace/path.hpp)
 };
 
 // The Phong-tessellated point of flat triangle `tri` (ids as in triangle_vertices of
@@ -72,7 +77,7 @@ inline PhongVertex phong_vertex(const Heightmap& hm, std::int32_t tri, double b0
         for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - p[k], n[k])) * n[k];
         out.position = flat - alpha * offset;
     }
-    out.normal = normalize(b[0] * n[0] + b[1] * n[1] + b[2] * n[2]);
+    out.normal = normalize(patch_normal<double>(p, n, b, flat, alpha));
     return out;
 }
 
@@ -82,6 +87,72 @@ inline PhongVertex phong_vertex_in_cell(const Heightmap& hm, int ci, int cj, dou
     const std::int32_t base = 2 * (cj * (hm.nx() - 1) + ci);
     if (a >= b) return phong_vertex(hm, base, 1.0 - a, a - b, b, alpha);
     return phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
+}
+
+// How far the flat facets of a k-fold tessellation are from the curved patches they
+// stand for: per sub-triangle, the largest angle (radians) between its facet normal and
+// the patch normal at its three corners and its centroid. `quantile` in [0, 1] picks
+// which sub-triangle's angle is reported (1: the worst).
+inline double tessellation_normal_error(const Heightmap& hm, double alpha, int k, double quantile = 1.0) {
+    const int nx = hm.nx(), ny = hm.ny();
+    std::vector<float> angles;
+    angles.reserve(std::size_t(nx - 1) * (ny - 1) * 2 * k * k);
+    for (int cj = 0; cj + 1 < ny; ++cj)
+        for (int ci = 0; ci + 1 < nx; ++ci) {
+            if (!hm.cell_active(ci, cj)) continue;
+            const std::int32_t base = 2 * (cj * (nx - 1) + ci);
+            for (int r = 0; r < k; ++r)
+                for (int s = 0; s < k; ++s)
+                    for (int half = 0; half < 2; ++half) {
+                        // Cell-local corners of sub-triangle `half` of sub-cell (s, r), and
+                        // the flat triangle it lies on (the sub-cell's diagonal is the
+                        // cell's direction: off the diagonal both halves share one).
+                        const double a0 = double(s) / k, b0 = double(r) / k, a1 = double(s + 1) / k,
+                                     b1 = double(r + 1) / k;
+                        const double ca[3] = {a0, a1, half == 0 ? a1 : a0};
+                        const double cb[3] = {b0, half == 0 ? b0 : b1, b1};
+                        const int parent = s > r ? 0 : s < r ? 1 : half;
+                        const auto at = [&](double a, double b) {
+                            return parent == 0 ? phong_vertex(hm, base, 1.0 - a, a - b, b, alpha)
+                                               : phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
+                        };
+                        PhongVertex v[4];
+                        for (int m = 0; m < 3; ++m) v[m] = at(ca[m], cb[m]);
+                        v[3] = at((ca[0] + ca[1] + ca[2]) / 3.0, (cb[0] + cb[1] + cb[2]) / 3.0);
+                        const Vec3d f = normalize(cross(v[1].position - v[0].position, v[2].position - v[0].position));
+                        double worst = 0;
+                        for (const PhongVertex& pv : v)
+                            worst = std::max(worst, std::atan2(length(cross(f, pv.normal)), dot(f, pv.normal)));
+                        angles.push_back(float(worst));
+                    }
+        }
+    if (angles.empty()) return 0.0;
+    const auto q = std::size_t(std::clamp(quantile, 0.0, 1.0) * double(angles.size() - 1) + 0.5);
+    std::nth_element(angles.begin(), angles.begin() + std::ptrdiff_t(q), angles.end());
+    return double(angles[q]);
+}
+
+// The subdivision level the exported facets need: the smallest k in [1, max_k] whose
+// tessellation_normal_error (at `quantile`) is at most `max_angle` radians, or max_k when
+// none is. The error falls about as 1/k (the patches are quadratic), which gives the
+// first guess; the guess is then checked and raised until it holds.
+struct SubdivisionChoice {
+    int k = 1;
+    double normal_error = 0;  // tessellation_normal_error at k (radians)
+};
+inline SubdivisionChoice subdivisions_for_tolerance(const Heightmap& hm, double alpha, double max_angle,
+                                                    int max_k = 16, double quantile = 0.9) {
+    if (!(max_angle > 0)) throw InputError("export: the facet tolerance must be positive");
+    SubdivisionChoice c;
+    c.normal_error = tessellation_normal_error(hm, alpha, 1, quantile);
+    if (c.normal_error <= max_angle || max_k <= 1) return c;
+    int k = std::clamp(int(std::ceil(c.normal_error / max_angle)), 2, max_k);
+    while (true) {
+        c.k = k;
+        c.normal_error = tessellation_normal_error(hm, alpha, k, quantile);
+        if (c.normal_error <= max_angle || k >= max_k) return c;
+        k = std::min(max_k, std::max(k + 1, int(std::ceil(k * c.normal_error / max_angle))));
+    }
 }
 
 namespace detail {

@@ -1,5 +1,5 @@
 #pragma once
-// The per-ray physics shared by every tracer: Phong-corrected hits, reflection and
+// The per-ray physics shared by every tracer: hits on Phong patches, reflection and
 // refraction, the lens back face, the receiver and the deposit. A tracer only has to
 // find the nearest surface hit of a segment; `advance` does the rest. All functions are
 // FREEFORM_HD and work in the surface frame (surface plane w = 0, normal +w).
@@ -110,8 +110,42 @@ FREEFORM_HD inline Vec3 phong_point(const SurfaceHit& h, Vec3 flat, float alpha)
     return flat - alpha * offset;
 }
 
+// The interpolated vertex normal (unit). Not the normal of any surface: a mill follows
+// positions, and the surface whose positions phong_point gives has the normal of
+// patch_normal below. Kept for shading meshes "with their stored normals" on request.
 FREEFORM_HD inline Vec3 shading_normal(const SurfaceHit& h) {
     return normalize(h.b0 * h.n[0] + h.b1 * h.n[1] + h.b2 * h.n[2]);
+}
+
+// The true normal (not unit; facing the side cross(p1 - p0, p2 - p0) faces) of the
+// Phong-tessellated patch at the flat hit `flat`: the cross product of the partial
+// derivatives of phong_point along the two triangle edges from vertex 0. With
+// b0 = 1 - b1 - b2, flat = p0 + b1 e1 + b2 e2 and s_k = (flat - p_k)·n_k,
+//   P = flat - alpha Σ b_k s_k n_k,
+//   ∂P/∂b1 = e1 - alpha [(b0 e1·n0 - s0) n0 + (b1 e1·n1 + s1) n1 + b2 (e1·n2) n2],
+//   ∂P/∂b2 = e2 - alpha [(b0 e2·n0 - s0) n0 + b1 (e2·n1) n1 + (b2 e2·n2 + s2) n2].
+// alpha = 0 gives the flat facet's normal. This is the normal of the surface that is
+// exported and milled (surface/export.hpp); the patch is continuous across triangle
+// edges, its normal in general is not.
+template <class T>
+FREEFORM_HD inline Vec3T<T> patch_normal(const Vec3T<T> (&p)[3], const Vec3T<T> (&n)[3], const T (&b)[3],
+                                         Vec3T<T> flat, T alpha) {
+    const Vec3T<T> e1 = p[1] - p[0], e2 = p[2] - p[0];
+    const Vec3T<T> facet = cross(e1, e2);
+    if (alpha == T(0)) return facet;
+    const T s0 = dot(flat - p[0], n[0]), s1 = dot(flat - p[1], n[1]), s2 = dot(flat - p[2], n[2]);
+    const T a0 = dot(e1, n[0]), a1 = dot(e1, n[1]), a2 = dot(e1, n[2]);
+    const T c0 = dot(e2, n[0]), c1 = dot(e2, n[1]), c2 = dot(e2, n[2]);
+    const Vec3T<T> t1 = e1 - alpha * ((b[0] * a0 - s0) * n[0] + (b[1] * a1 + s1) * n[1] + (b[2] * a2) * n[2]);
+    const Vec3T<T> t2 = e2 - alpha * ((b[0] * c0 - s0) * n[0] + (b[1] * c1) * n[1] + (b[2] * c2 + s2) * n[2]);
+    const Vec3T<T> m = cross(t1, t2);
+    // A patch folded over itself (vertex normals far from the facet's) has no normal
+    // there; the facet's is the nearest meaningful one.
+    return dot(m, facet) > T(0) ? m : facet;
+}
+FREEFORM_HD inline Vec3 patch_normal(const SurfaceHit& h, Vec3 flat, float alpha) {
+    const float b[3] = {h.b0, h.b1, h.b2};
+    return patch_normal<float>(h.p, h.n, b, flat, alpha);
 }
 
 // Material parameters in kernel form.
@@ -138,8 +172,14 @@ FREEFORM_HD inline bool wants_front(const PathState& s) { return !s.inside; }
 struct PathParams {
     MaterialView material;
     ReceiverView receiver;
-    float phong_alpha = 0.75f;
+    float phong_alpha = 0.5f;  // shape of the height field's patches (0: flat triangles; Surface's default)
     int max_depth = 8;
+    // false (the physical model): a hit is shaded with the normal of the surface it lies
+    // on, patch_normal of the height field's Phong patch, the facet normal of a mesh
+    // triangle (meshes are their geometry). true: the interpolated vertex normals of
+    // Phong shading, with mirror meshes Phong-corrected too; no milled surface has these
+    // normals (kept to compare with tools that shade this way).
+    bool interpolated_normals = false;
 };
 
 namespace path_detail {
@@ -201,9 +241,12 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
         return false;
     }
     const Vec3 flat = s.o + hit.t * s.d;
-    // The interpolated normal before normalisation: a mirror needs only its direction.
-    const Vec3 m = hit.b0 * hit.n[0] + hit.b1 * hit.n[1] + hit.b2 * hit.n[2];
-    s.o = phong_point(hit, flat, pp.phong_alpha);
+    // Extra meshes are flat triangles unless interpolated normals are asked for.
+    const float alpha = hit.kind == HitKind::surface || pp.interpolated_normals ? pp.phong_alpha : 0.0f;
+    // The normal before normalisation: a mirror needs only its direction.
+    const Vec3 m = pp.interpolated_normals ? hit.b0 * hit.n[0] + hit.b1 * hit.n[1] + hit.b2 * hit.n[2]
+                                           : patch_normal(hit, flat, alpha);
+    s.o = phong_point(hit, flat, alpha);
     s.exclude = hit.tri;
     if (hit.kind == HitKind::mirror_mesh || !pp.material.lens) {
         // d - 2 (d·n) n with n = m / |m|, written without the square root and the two
@@ -212,7 +255,7 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
         return true;
     }
     // Lens front face: into the material from outside, out of it from inside.
-    const Vec3 ns = m * (1.0f / std::sqrt(dot(m, m)));  // shading_normal(hit)
+    const Vec3 ns = m * (1.0f / std::sqrt(dot(m, m)));
     Vec3 out;
     const float from = s.inside ? pp.material.ior : 1.0f;
     const float to = s.inside ? 1.0f : pp.material.ior;

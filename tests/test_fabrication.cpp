@@ -1,0 +1,194 @@
+// What gets milled is what is simulated (issue 13): the tracers shade a hit with the
+// true normal of the Phong patch it lies on, the exported facets approach those patches
+// as the subdivision grows, and the exported mesh traced as flat triangles gives the
+// design's irradiance.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <freeform/core/rng.hpp>
+#include <freeform/design/fabrication.hpp>
+#include <freeform/design/start.hpp>
+#include <freeform/surface/export.hpp>
+#include <freeform/trace/heightfield_kernel.hpp>
+#if defined(FREEFORM_WITH_EMBREE)
+#include <freeform/design/exported.hpp>
+#endif
+
+#include "support.hpp"
+
+using namespace freeform;
+using namespace freeform::testing;
+
+namespace {
+
+// A bumpy surface, curved at the scale of a few cells.
+Heightmap bumps(int n) {
+    Scene s = basic_scene();
+    Heightmap hm = surface_for(s, n);
+    shape(hm, [](double u, double v) { return 0.002 * std::sin(60 * u) * std::cos(45 * v) + 0.03 * u * u; });
+    return hm;
+}
+
+double angle(Vec3d a, Vec3d b) { return std::atan2(length(cross(a, b)), dot(a, b)); }
+
+// A ring and a bar: empty regions, sharp edges, mass off-centre.
+ImageD ring_and_bar(int w, int h) {
+    ImageD t = ImageD::Zero(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const double u = (x + 0.5) / w - 0.5, v = (y + 0.5) / h - 0.5;
+            const double r = std::hypot(u + 0.1, v + 0.05);
+            if ((r > 0.15 && r < 0.3) || (v > 0.32 && v < 0.42 && u > -0.3 && u < 0.35)) t(y, x) = 1;
+        }
+    return t;
+}
+
+}  // namespace
+
+TEST_CASE("patch_normal is the normal of the surface phong_point describes (finite differences)") {
+    const Heightmap hm = bumps(17);
+    const HeightfieldView view = hm.view();
+    CounterRng rng(11);
+    double worst_fd = 0, worst_float = 0, worst_interp = 0;
+    for (int s = 0; s < 500; ++s) {
+        const auto tri = std::int32_t(rng.below(2u * 16u * 16u));
+        double b1 = rng.uniform(0.02, 0.96), b2 = rng.uniform(0.02, 0.96);
+        if (b1 + b2 > 0.98) b1 = 0.98 - b1 * 0.5, b2 = 0.98 - b1 - 0.01;
+        const double b0 = 1 - b1 - b2;
+        // Independent of the formula: central differences of the Phong position along
+        // the two barycentric directions (b0 takes up the change).
+        const double h = 1e-5;
+        const auto pos = [&](double c1, double c2) { return phong_vertex(hm, tri, 1 - c1 - c2, c1, c2, 0.75).position; };
+        const Vec3d d1 = (pos(b1 + h, b2) - pos(b1 - h, b2)) / (2 * h);
+        const Vec3d d2 = (pos(b1, b2 + h) - pos(b1, b2 - h)) / (2 * h);
+        const Vec3d fd = normalize(cross(d1, d2));
+        const PhongVertex pv = phong_vertex(hm, tri, b0, b1, b2, 0.75);
+        worst_fd = std::max(worst_fd, angle(fd, pv.normal));
+        // The float kernel (what the tracers use) agrees with the double export.
+        SurfaceHit hit;
+        hit.tri = tri;
+        hit.kind = HitKind::surface;
+        hit.b0 = float(b0), hit.b1 = float(b1), hit.b2 = float(b2);
+        fill_hit_vertices(view, hit);
+        const Vec3 flat = hit.b0 * hit.p[0] + hit.b1 * hit.p[1] + hit.b2 * hit.p[2];
+        worst_float = std::max(worst_float, angle(Vec3d(normalize(patch_normal(hit, flat, 0.75f))), pv.normal));
+        worst_interp = std::max(worst_interp, angle(Vec3d(shading_normal(hit)), pv.normal));
+    }
+    MESSAGE("patch normal vs finite differences ", worst_fd, " rad, float kernel vs double ", worst_float,
+            " rad; the interpolated normal is off by up to ", worst_interp, " rad");
+    CHECK(worst_fd < 1e-6);
+    CHECK(worst_float < 2e-5);
+    CHECK(worst_interp > 1e-3);  // the old shading normal is not the surface's normal
+}
+
+TEST_CASE("alpha = 0: the patch is the flat triangle and its normal the facet's") {
+    const Heightmap hm = bumps(9);
+    for (std::int32_t tri : {0, 1, 37, 100}) {
+        const PhongVertex pv = phong_vertex(hm, tri, 0.2, 0.3, 0.5, 0.0);
+        const PhongVertex a = phong_vertex(hm, tri, 1, 0, 0, 0.0), b = phong_vertex(hm, tri, 0, 1, 0, 0.0),
+                          c = phong_vertex(hm, tri, 0, 0, 1, 0.0);
+        CHECK(angle(pv.normal, normalize(cross(b.position - a.position, c.position - a.position))) < 1e-12);
+        CHECK(pv.normal.z > 0);  // facing +w, the light side
+    }
+}
+
+TEST_CASE("facets approach the patches as 1/k, and the tolerance picks the smallest k that meets it") {
+    const Heightmap hm = bumps(21);
+    const double e1 = tessellation_normal_error(hm, 0.75, 1, 0.9), e2 = tessellation_normal_error(hm, 0.75, 2, 0.9),
+                 e4 = tessellation_normal_error(hm, 0.75, 4, 0.9);
+    MESSAGE("90th percentile facet normal error: k=1 ", e1, ", k=2 ", e2, ", k=4 ", e4, " rad");
+    CHECK(e1 > 1e-3);
+    CHECK(e2 / e4 == doctest::Approx(2.0).epsilon(0.15));
+    CHECK(e1 / e2 == doctest::Approx(2.0).epsilon(0.15));
+    const double tol = 0.3 * e1;
+    const SubdivisionChoice c = subdivisions_for_tolerance(hm, 0.75, tol, 16, 0.9);
+    CHECK(c.normal_error <= tol);
+    CHECK(c.k > 1);
+    CHECK(tessellation_normal_error(hm, 0.75, c.k - 1, 0.9) > tol);
+    CHECK(subdivisions_for_tolerance(hm, 0.75, 1e-9, 5, 0.9).k == 5);  // capped
+    CHECK(subdivisions_for_tolerance(hm, 0.0, 1e-9, 16, 0.9).k == 1);  // flat facets are exact
+}
+
+TEST_CASE("facet tolerance: a quarter of a receiver cell of light displacement") {
+    Scene s = basic_scene(200);  // 1 mm cells, receiver 0.5 m away
+    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.25e-3 / 1.0));
+    s.optimise.export_tolerance = 0.5;
+    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.5e-3));
+    s.surface.material = Lens{1.5, 0.01};  // a face of index 1.5 deflects a quarter as much
+    CHECK(facet_normal_tolerance(s) == doctest::Approx(2e-3));
+}
+
+#if defined(FREEFORM_WITH_EMBREE)
+
+namespace {
+
+// The start of a design (the transport surface) of scene s on an n × n mesh, its
+// irradiance, and the irradiance of its exported facets; checks what issue 13 asks.
+void check_exported_matches(Scene s, int n, double max_l1) {
+    s.target = TargetSpec{};
+    s.receiver.deposit = Deposit::bilinear;
+    const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
+    const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1);
+    REQUIRE(st.report.used == "transport");
+    const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
+    const Traced design = trace_scene(s, st.surface, rays, exec::omp);
+    const Fabrication f = make_fabrication(s, st.surface);
+    const ExportedTrace e = trace_exported(exec::omp, s, st.surface, f.subdivisions, rays);
+    const double l1 = l1_distance(design.histogram, e.histogram) / (2.0 * double(rays.total));
+    // And the same facets with k = 1: far off, or the check above could not fail.
+    const ExportedTrace coarse = trace_exported(exec::omp, s, st.surface, 1, rays);
+    const double l1_coarse = l1_distance(design.histogram, coarse.histogram) / (2.0 * double(rays.total));
+    MESSAGE("k = ", f.subdivisions, " (normal error ", f.normal_error * 1e3, " mrad, tolerance ",
+            f.normal_tolerance * 1e3, " mrad): L1 to the design ", l1, "; k = 1: ", l1_coarse);
+    CHECK(l1 <= max_l1);
+    CHECK(l1_coarse > 2 * l1);
+    CHECK(std::abs(e.totals.energy() - design.totals.energy()) < 0.01);
+}
+
+}  // namespace
+
+TEST_CASE("the exported mesh traced as flat triangles gives the design's irradiance") {
+    Scene s = basic_scene(100);
+    SUBCASE("collimated mirror") { check_exported_matches(s, 51, 0.02); }
+    SUBCASE("point light, elliptical aperture") {
+        s.light.shape = PointLight{{0, 0, 0.3}, {}, {}};
+        s.surface.aperture = Aperture::ellipse;
+        s.receiver.size = {0.3, 0.3};
+        check_exported_matches(s, 51, 0.02);
+    }
+    SUBCASE("lens front face over the model's back face") {
+        s.surface.material = Lens{1.49, 0.01};
+        s.surface.h_min = -0.008, s.surface.h_max = 0.008;
+        s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.receiver.size = {0.15, 0.15};
+        check_exported_matches(s, 51, 0.02);
+    }
+}
+
+TEST_CASE("a mesh is its geometry: stored normals change nothing unless asked for") {
+    Scene s = basic_scene(64);
+    const Heightmap hm = bumps(25);
+    const RaySet rays = generate_rays(s.light, hm, s.receiver, 1);
+    TriangleMesh mesh = tessellate_surface(hm, 0.75f, 2, false);
+    TriangleMesh scrambled = mesh;
+    CounterRng rng(5);
+    for (Vec3d& n : scrambled.normals)
+        n = normalize(Vec3d{rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), 1.0});
+    PathParams pp = make_path_params(s);
+    pp.phong_alpha = 0.0f;
+    const auto run = [&](const TriangleMesh& m, const PathParams& p) {
+        Traced t{Histogram(s.receiver.width, s.receiver.height), {}};
+        EmbreeTracer(m, rays, p).trace_all(exec::omp, t.histogram, t.totals);
+        return t;
+    };
+    const Traced a = run(mesh, pp), b = run(scrambled, pp);
+    CHECK(a.histogram == b.histogram);
+    PathParams shaded = make_path_params(s);
+    shaded.interpolated_normals = true;
+    CHECK(run(mesh, shaded).histogram != run(scrambled, shaded).histogram);
+}
+
+#endif
