@@ -93,6 +93,7 @@ def povray_render(args, scene, mesh, work, supersample, photons):
     W, H = w * supersample, h * supersample
     pov = os.path.join(work, "scene.pov")
     info = povray_scene.write_scene(pov, scene, mesh, W, H, photons, gather=(args.gather_min, args.gather_max))
+    info["width"], info["height"] = W, H
     hdr = os.path.join(work, "povray.hdr")
     log = os.path.join(work, "povray.log")
     cmd = [args.povray, "-D", "+WT%d" % args.threads, "+W%d" % W, "+H%d" % H, "-A", "+FH", "-V", "+GS", "+GR",
@@ -281,7 +282,9 @@ def main():
     p.add_argument("--check-photons", type=int, default=1_000_000)
     p.add_argument("--gather-min", type=int, default=100)
     p.add_argument("--gather-max", type=int, default=400)
-    p.add_argument("--supersample", type=int, default=2, help="POV-Ray pixels per receiver pixel, each way")
+    p.add_argument("--supersample", type=int, default=2, help="least POV-Ray pixels per receiver pixel, each way")
+    p.add_argument("--picture", type=int, default=400,
+                   help="least POV-Ray pixels along the receiver's longer side (raises --supersample)")
     p.add_argument("--freeform-rays-per-cell", type=float, default=256)
     p.add_argument("--cases", default="all", help="comma-separated case names (E, F, L, headlight) or all")
     p.add_argument("--skip-checks", action="store_true")
@@ -327,7 +330,13 @@ def main():
             ff, ff_s, ffm = freeform_render(args, scene, work, heightmap=os.path.join(design, "heightmap.pfm"))
         else:
             ff, ff_s, ffm = freeform_render(args, scene, work, mesh=mesh)
-        pv, pv_s, info = povray_render(args, scene, mesh, work, args.supersample, args.photons)
+        # POV-Ray point-samples the photon map (one ray per pixel, each estimate a disc of
+        # about 1 mm or less); freeform integrates over whole cells. Enough POV-Ray pixels
+        # per cell (--picture on the longer side) make both cell averages of the same thing.
+        w, h = scene["receiver"]["resolution"]
+        supersample = max(args.supersample, -(-args.picture // max(w, h)))
+        pv, pv_s, info = povray_render(args, scene, mesh, work, supersample, args.photons)
+        info["supersample"] = supersample
         tgt = target_image(scene_path, design, scene, factor)
         ffb, pvb = bin_image(ff, factor), bin_image(pv, factor)
         d = l1(ffb, pvb)
@@ -404,10 +413,11 @@ def write_report(args, check_lines, case_lines, total):
     out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (name, d, d_full, e_ff, e_pv, err, err_exp, design_s, ff_s, pv_s, res, full_res, info, energy,
          lens) in case_lines:
-        out.append("| %s | %s | **%.4f** | %.4f (%s) | %.4f | %.4f | %s / %s | %.1f s | %.0f s | %d x supersampled "
+        out.append("| %s | %s | **%.4f** | %.4f (%s) | %.4f | %.4f | %s / %s | %.1f s | %.0f s | %d x %d (%d x %d per cell) "
                    "| %s / %s | %d |" % (
                        name, res, d, d_full, full_res, e_ff, e_pv, "%.4f" % err if err is not None else "–",
-                       "%.4f" % err_exp if err_exp is not None else "–", ff_s, pv_s, args.supersample,
+                       "%.4f" % err_exp if err_exp is not None else "–", ff_s, pv_s, info["width"], info["height"],
+                       info["supersample"], info["supersample"],
                        "{:,}".format(info["photons_shot"] or 0), "{:,}".format(info["photons_stored"] or 0),
                        info["triangles"]))
     out.append("")
@@ -416,9 +426,9 @@ def write_report(args, check_lines, case_lines, total):
                "(`--mesh`), for the lens the designed heightmap (`--heightmap`, Phong patches: `render --mesh` "
                "does not refract a lens solid in this version; the exported solid differs from the heightmap by "
                "metrics.json `export.l1_to_design_irradiance`). POV-Ray side: the exported mesh as `mesh2` (flat "
-               "triangles), %d x %d POV-Ray pixels per receiver pixel (one ray each, no anti-aliasing) summed into "
-               "cells, photon gather %d–%d photons per estimate. Pictures: `benchmarks/results/validation/`.\n"
-               % (args.freeform_rays_per_cell, args.supersample, args.supersample, args.gather_min, args.gather_max))
+               "triangles), at least %d POV-Ray pixels along the receiver's longer side (one ray each, no "
+               "anti-aliasing), summed into receiver cells, photon gather %d–%d photons per estimate. Pictures: `benchmarks/results/validation/`.\n"
+               % (args.freeform_rays_per_cell, args.picture, args.gather_min, args.gather_max))
     with open(os.path.join(args.results, "validation.md"), "w") as f:
         f.write("\n".join(out) + "\n")
 
