@@ -6,6 +6,9 @@
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
 #                         (the full study reuses the runs in benchmarks/results/runs, the committed
 #                         ones included; STUDY_ARGS=--fresh measures every run again)
+#   make validate       independent check with POV-Ray 3.7 photon mapping: designs E, F, L and the
+#                       headlight, renders them in POV-Ray, compares (benchmarks/results/validation.md;
+#                       VALIDATE_ARGS="--reuse DIR" reuses designs, see scripts/validate/validate.py -h)
 # The presets set FREEFORM_WERROR=ON, so warnings are errors in every build made here and in
 # CI; a plain `cmake -B build` leaves it OFF (warnings stay warnings for users' compilers).
 JOBS ?= $(shell nproc)
@@ -24,7 +27,7 @@ FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o 
 # Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.
 .NOTPARALLEL:
 
-.PHONY: all deps deps-bench deps-clang configure build demo test test-clang test-sanitize bench clean format
+.PHONY: all deps deps-bench deps-clang deps-validate validate configure build demo test test-clang test-sanitize bench clean format
 
 all: build
 
@@ -37,6 +40,9 @@ deps-bench:
 deps-clang:
 	@scripts/install-deps.sh clang
 
+deps-validate:
+	@scripts/install-deps.sh validate
+
 configure:
 	cmake --preset release
 
@@ -48,6 +54,12 @@ demo: deps configure
 	cmake --build --preset release --parallel $(JOBS) --target freeform_cli
 	$(DEMO_CMD)
 	@echo "demo results are in $(DEMO_OUT)/ (open comparison.png: target | result | difference)"
+
+# Only the command line is needed (as for the demo).
+VALIDATE_ARGS ?=
+validate: deps deps-validate configure
+	cmake --build --preset release --parallel $(JOBS) --target freeform_cli
+	$(PYTHON) scripts/validate/validate.py --threads $(JOBS) $(VALIDATE_ARGS)
 
 test: deps build
 	ctest --preset release

@@ -3,6 +3,7 @@
 #   scripts/install-deps.sh          build, test and demo dependencies
 #   scripts/install-deps.sh bench    also the optimisers the benchmark studies compare against
 #   scripts/install-deps.sh clang    also Debian's clang (make test-clang; libomp-dev is in the base list)
+#   scripts/install-deps.sh validate also POV-Ray 3.7 and numpy (make validate: independent check of the tracer)
 # Silent when everything is already installed; safe to run any number of times.
 set -euo pipefail
 
@@ -16,12 +17,13 @@ for arg in "$@"; do
     case "$arg" in
         bench) packages+=(libpagmo-dev libnlopt-cxx-dev) ;;
         clang) packages+=(clang) ;;
+        validate) packages+=(povray python3-numpy) ;;
         -h | --help)
-            sed -n '2,6p' "$0" | sed 's/^# \{0,1\}//'
+            sed -n '2,7p' "$0" | sed 's/^# \{0,1\}//'
             exit 0
             ;;
         *)
-            echo "install-deps.sh: unknown argument '$arg' (expected: bench, clang)" >&2
+            echo "install-deps.sh: unknown argument '$arg' (expected: bench, clang, validate)" >&2
             exit 2
             ;;
     esac
