@@ -69,4 +69,20 @@ inline double l1_distance(const Histogram& a, const Histogram& b) {
     return s;
 }
 
+// A hit on surface triangle `tri` at barycentrics (b0, b1, b2), with its vertices filled
+// in as the tracers do, and the point on the flat triangle (phong_point's argument).
+struct HitAt {
+    SurfaceHit hit;
+    Vec3 flat;
+};
+inline HitAt surface_hit_at(const HeightfieldView& view, std::int32_t tri, double b0, double b1, double b2) {
+    HitAt h;
+    h.hit.tri = tri;
+    h.hit.kind = HitKind::surface;
+    h.hit.b0 = float(b0), h.hit.b1 = float(b1), h.hit.b2 = float(b2);
+    fill_hit_vertices(view, h.hit);
+    h.flat = h.hit.b0 * h.hit.p[0] + h.hit.b1 * h.hit.p[1] + h.hit.b2 * h.hit.p[2];
+    return h;
+}
+
 }  // namespace freeform::testing

@@ -18,7 +18,10 @@
 #include <freeform/surface/smooth.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
 
+#include "support.hpp"
+
 using namespace freeform;
+using freeform::testing::surface_hit_at;
 
 namespace {
 
@@ -227,12 +230,7 @@ TEST_CASE("phong_vertex is phong_point up to float rounding") {
         double b1 = rng.uniform(), b2 = rng.uniform();
         if (b1 + b2 > 1) b1 = 1 - b1, b2 = 1 - b2;
         const double b0 = 1 - b1 - b2;
-        SurfaceHit hit;
-        hit.tri = tri;
-        hit.kind = HitKind::surface;
-        hit.b0 = float(b0), hit.b1 = float(b1), hit.b2 = float(b2);
-        fill_hit_vertices(view, hit);
-        const Vec3 flat = hit.b0 * hit.p[0] + hit.b1 * hit.p[1] + hit.b2 * hit.p[2];
+        const auto [hit, flat] = surface_hit_at(view, tri, b0, b1, b2);
         const Vec3d pf = Vec3d(phong_point(hit, flat, 0.75f));
         const Vec3d nf = Vec3d(normalize(patch_normal(hit, flat, 0.75f)));
         const PhongVertex pd = phong_vertex(hm, tri, double(hit.b0), double(hit.b1), double(hit.b2), 0.75);

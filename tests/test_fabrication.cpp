@@ -68,12 +68,7 @@ TEST_CASE("patch_normal is the normal of the surface phong_point describes (fini
         const PhongVertex pv = phong_vertex(hm, tri, b0, b1, b2, 0.75);
         worst_fd = std::max(worst_fd, angle(fd, pv.normal));
         // The float kernel (what the tracers use) agrees with the double export.
-        SurfaceHit hit;
-        hit.tri = tri;
-        hit.kind = HitKind::surface;
-        hit.b0 = float(b0), hit.b1 = float(b1), hit.b2 = float(b2);
-        fill_hit_vertices(view, hit);
-        const Vec3 flat = hit.b0 * hit.p[0] + hit.b1 * hit.p[1] + hit.b2 * hit.p[2];
+        const auto [hit, flat] = surface_hit_at(view, tri, b0, b1, b2);
         worst_float = std::max(worst_float, angle(Vec3d(normalize(patch_normal(hit, flat, 0.75f))), pv.normal));
         worst_interp = std::max(worst_interp, angle(Vec3d(shading_normal(hit)), pv.normal));
     }
