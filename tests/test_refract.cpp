@@ -327,6 +327,14 @@ TEST_CASE("total internal reflection is followed: a right-angle prism turns a be
     // downwards, and never reaches the receiver.
     const Traced weak = trace_meshes(s, rays, {ExtraMesh{prism, MeshMaterial::refractive(1.3)}});
     CHECK(weak.totals.energy() < 0.005);
+    // Every crossing and every reflection counts towards trace.max_depth: with 3 the
+    // light is lost inside the glass before its way out.
+    s.trace.max_depth = 3;
+    const Traced shallow = trace_meshes(s, rays, {ExtraMesh{prism, MeshMaterial::refractive(1.5)}});
+    const double lost_depth =
+        double(shallow.totals.weight_by_status[std::size_t(RayStatus::lost_depth)]) / double(rays.total);
+    CHECK(shallow.totals.energy() < 0.005);
+    CHECK(lost_depth > 0.995);
 }
 
 TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the design's irradiance") {
