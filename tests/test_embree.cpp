@@ -453,7 +453,7 @@ TEST_CASE("bad input and Embree errors become exceptions") {
     CHECK_THROWS_AS(EmbreeTracer(hm, rays, pp, {}, 0), InputError);
     TriangleMesh broken = quad({0, 0, 0.1}, {0.01, 0, 0}, {0, 0.01, 0});
     broken.triangles.push_back({0, 1, 7});
-    CHECK_THROWS_WITH_AS(EmbreeTracer(hm, rays, pp, {ExtraMesh{broken, true}}),
+    CHECK_THROWS_WITH_AS(EmbreeTracer(hm, rays, pp, {ExtraMesh{broken, MeshMaterial::mirror()}}),
                          doctest::Contains("mesh 0 triangle 2 uses vertex 7"), InputError);
     CHECK_THROWS_AS(EmbreeTracer(TriangleMesh{}, rays, pp), InputError);
 

@@ -34,18 +34,6 @@ Heightmap bumps(int n) {
 
 double angle(Vec3d a, Vec3d b) { return std::atan2(length(cross(a, b)), dot(a, b)); }
 
-// A ring and a bar: empty regions, sharp edges, mass off-centre.
-ImageD ring_and_bar(int w, int h) {
-    ImageD t = ImageD::Zero(h, w);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const double u = (x + 0.5) / w - 0.5, v = (y + 0.5) / h - 0.5;
-            const double r = std::hypot(u + 0.1, v + 0.05);
-            if ((r > 0.15 && r < 0.3) || (v > 0.32 && v < 0.42 && u > -0.3 && u < 0.35)) t(y, x) = 1;
-        }
-    return t;
-}
-
 }  // namespace
 
 TEST_CASE("patch_normal is the normal of the surface phong_point describes (finite differences)") {

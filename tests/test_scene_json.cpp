@@ -43,7 +43,8 @@ json full_scene() {
         "receiver": {"center": [0, 0, -0.4], "normal": [0, 0, 1], "up": [1, 0, 0],
                      "size": [0.3, 0.25], "resolution": [120, 100], "deposit": "nearest"},
         "target": {"text": "Q", "font": "DejaVuSans", "margin": 0.2},
-        "meshes": [{"file": "walls.obj", "material": "mirror"}, {"file": "/abs/block.obj"}],
+        "meshes": [{"file": "walls.obj", "material": "mirror"}, {"file": "/abs/block.obj"},
+                   {"file": "prism.obj", "material": {"refractive": 1.52}}],
         "trace": {"tracer": "embree", "max_depth": 12},
         "optimize": {"time_budget": 2.5, "seed": 42, "max_iterations": 1000, "target_error": 0.05, "threads": 3}
     })");
@@ -101,7 +102,7 @@ TEST_CASE("a minimal scene gets every documented default") {
     CHECK(s.surface.h_max == 0.005);
     CHECK(s.surface.aperture == Aperture::rect);
     CHECK(std::holds_alternative<Mirror>(s.surface.material));
-    CHECK(s.surface.phong_alpha == 0.5);
+    CHECK(s.surface.phong_alpha == 0.5);  // docs/scene.md: ½ since issue 13
     CHECK(s.surface.initial_pfm.empty());
     CHECK_FALSE(s.surface.initial_paraboloid.has_value());
 
@@ -166,11 +167,13 @@ TEST_CASE("a full scene parses with the values it states") {
     CHECK(s.target->margin == 0.2);
     CHECK(s.target->image.empty());
 
-    REQUIRE(s.meshes.size() == 2);
+    REQUIRE(s.meshes.size() == 3);
     CHECK(s.meshes[0].file == fs::path("/scenes/here/walls.obj"));
-    CHECK(s.meshes[0].mirror);
+    CHECK(s.meshes[0].material.is_mirror());
     CHECK(s.meshes[1].file == fs::path("/abs/block.obj"));
-    CHECK_FALSE(s.meshes[1].mirror);
+    CHECK(s.meshes[1].material.kind == MeshKind::absorber);
+    CHECK(s.meshes[2].material.is_refractive());
+    CHECK(s.meshes[2].material.ior == 1.52);
     CHECK(s.base_dir == fs::path("/scenes/here"));
 
     CHECK(s.trace.tracer == TracerChoice::embree);
@@ -363,7 +366,18 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
         {"mesh material",
          {{"meshes", {{{"file", "a.obj"}, {"material", "glass"}}}}},
          "meshes[0].material: ",
-         R"("absorber", "mirror")"},
+         R"("absorber", "mirror" or {"refractive": ior})"},
+        {"mesh index not above 1",
+         {{"meshes", {{{"file", "a.obj"}, {"material", {{"refractive", 1.0}}}}}}},
+         "meshes[0].material.refractive: ",
+         "must be > 1"},
+        {"mesh index missing", {{"meshes", {{{"file", "a.obj"}, {"material", json::object()}}}}},
+         "meshes[0].material.refractive: ",
+         "missing required key"},
+        {"mesh thickness",
+         {{"meshes", {{{"file", "a.obj"}, {"material", {{"refractive", 1.5}, {"thickness", 0.01}}}}}}},
+         "meshes[0].material.thickness: ",
+         "closed solid"},
         {"meshes need embree",
          {{"meshes", {{{"file", "a.obj"}}}}, {"trace", {{"tracer", "heightfield"}}}},
          "trace.tracer: ",

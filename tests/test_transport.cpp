@@ -272,7 +272,7 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
 TEST_CASE("transport start: scenes it cannot model fall back to flat and say why") {
     Scene s = testing::basic_scene(40);
     s.target = TargetSpec{};
-    s.meshes.push_back(MeshSpec{"wall.obj", false});
+    s.meshes.push_back(MeshSpec{"wall.obj", MeshMaterial::absorber()});
     const DesignStart st = make_design_start(s, testing::surface_for(s, 21), two_blocks(40, 40), 1, 1);
     CHECK(st.report.requested == "transport");
     CHECK(st.report.used == "flat");

@@ -1,6 +1,7 @@
 // The `freeform` command line: render a scene, or design its surface.
 //
-//   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj [--mesh-normals]] [--tracer T] [--threads N]
+//   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj [--material refractive:N] [--mesh-normals]]
+//                   [--tracer T] [--threads N]
 //   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
 //
 // Bad input (a scene key, a file, an option) prints one line on stderr and exits with 2;
@@ -8,7 +9,9 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -17,6 +20,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <system_error>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -89,6 +93,23 @@ std::string fixed(double v, int digits) {
     s.precision(digits);
     s << v;
     return s.str();
+}
+
+// --material: "refractive:IOR" makes --mesh a closed solid of that index (the whole
+// lens), in place of the scene's surface and its material.
+MeshMaterial parse_mesh_material(const std::string& s) {
+    constexpr std::string_view prefix = "refractive:";
+    const auto bad = [&](const std::string& why) {
+        return InputError("--material: " + why + ", got '" + s + "' (expected refractive:IOR, e.g. refractive:1.49)");
+    };
+    if (s.rfind(prefix, 0) != 0) throw bad("unknown material");
+    const std::string number = s.substr(prefix.size());
+    double ior = 0;
+    const auto [end, ec] = std::from_chars(number.data(), number.data() + number.size(), ior);
+    if (number.empty() || ec != std::errc{} || end != number.data() + number.size())
+        throw bad("the refractive index is not a number");
+    if (!(ior > 1) || !std::isfinite(ior)) throw bad("the refractive index must be a finite number > 1");
+    return MeshMaterial::refractive(ior);
 }
 
 TracerChoice parse_tracer(const std::string& s) {
@@ -218,6 +239,7 @@ void check_output_dir(const fs::path& out) {
 struct RenderArgs {
     fs::path scene, out, heightmap, mesh;
     std::string tracer;
+    std::string material;
     int threads = 0;
     std::optional<std::int64_t> seed;
     bool mesh_normals = false;
@@ -229,6 +251,11 @@ int run_render(const RenderArgs& a) {
     check_output_dir(a.out);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
+    std::optional<MeshMaterial> mesh_material;
+    if (!a.material.empty()) {
+        if (a.mesh.empty()) throw InputError("--material: applies to the mesh of --mesh, and none was given");
+        mesh_material = parse_mesh_material(a.material);
+    }
     const TracerChoice requested = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
     const TracerDecision decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
 
@@ -252,16 +279,37 @@ int run_render(const RenderArgs& a) {
         }
     }
     std::optional<TriangleMesh> mesh;
-    if (!a.mesh.empty()) mesh = io::read_obj(a.mesh);
+    if (!a.mesh.empty()) mesh = io::read_mesh(a.mesh);
+    // A solid is one surface: corners repeated per face (OBJ with face normals, STL) are
+    // merged before its edges are matched.
+    if (mesh && mesh_material) {
+        mesh = io::welded(*mesh);
+        check_refractive_solid(*mesh, a.mesh.string());
+    }
     std::vector<TriangleMesh> extra;
-    for (const auto& m : scene.meshes) extra.push_back(io::read_obj(m.file));
+    for (const auto& m : scene.meshes) {
+        extra.push_back(io::read_mesh(m.file));
+        if (m.material.is_refractive()) {
+            extra.back() = io::welded(extra.back());
+            check_refractive_solid(extra.back(), m.file.string());
+        }
+    }
 
-    const RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
+    RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
     if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
         throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
     PathParams pp = make_path_params(scene);
     // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
     if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
+    // A refractive solid is the whole lens: the scene's lens model (its flat back face)
+    // does not apply, and a collimated beam must start above the solid's top.
+    if (mesh_material) {
+        pp.material = MaterialView{};
+        double top = -std::numeric_limits<double>::infinity();
+        for (const Vec3d& p : mesh->vertices) top = std::max(top, scene.surface.frame.to_local(p).z);
+        const double margin = 1e-6 * std::max(scene.surface.size.x, scene.surface.size.y);
+        start_collimated_above(scene.light, top + margin, rays);
+    }
     pp.interpolated_normals = a.mesh_normals;
     const int threads = thread_count(exec::omp_t{a.threads});
     StatusLine status(true);
@@ -272,8 +320,11 @@ int run_render(const RenderArgs& a) {
 #if defined(FREEFORM_WITH_EMBREE)
         std::vector<ExtraMesh> extras;
         for (std::size_t k = 0; k < extra.size(); ++k)
-            extras.push_back(to_surface_frame(extra[k], scene.surface.frame, scene.meshes[k].mirror));
-        if (mesh) {
+            extras.push_back(to_surface_frame(extra[k], scene.surface.frame, scene.meshes[k].material));
+        if (mesh && mesh_material) {
+            extras.insert(extras.begin(), to_surface_frame(*mesh, scene.surface.frame, *mesh_material));
+            r = render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, status);
+        } else if (mesh) {
             const ExtraMesh local = to_surface_frame(*mesh, scene.surface.frame, true);
             r = render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, status);
         } else {
@@ -299,6 +350,9 @@ int run_render(const RenderArgs& a) {
     m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
     if (mesh || !scene.meshes.empty())
         m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
+    if (mesh)
+        m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
+                                           : json("the scene's surface material");
     const ImageD irradiance = r.histogram.to_image();
     std::optional<Target> t;
     if (target) {
@@ -520,6 +574,12 @@ int main(int argc, char** argv) {
     render->add_option("--out", ra.out, "output directory (irradiance.pfm/.png, metrics.json)")->required();
     render->add_option("--heightmap", ra.heightmap, "trace this heightmap (PFM, surface frame heights in metres)");
     render->add_option("--mesh", ra.mesh, "trace this triangle mesh (OBJ, world coordinates) in place of the surface");
+    render->add_option("--material", ra.material,
+                       "what the --mesh is: refractive:IOR (e.g. refractive:1.49) traces it as a closed solid of "
+                       "that index (the whole lens, e.g. a design's exported surface.obj, or a lens from another "
+                       "tool; Snell at every crossing, total internal reflection followed, no Fresnel loss), "
+                       "replacing the scene's lens model; the mesh must be closed, consistently oriented and "
+                       "outward-facing. Default: the mesh is the surface, with the scene's material");
     render->add_flag("--mesh-normals", ra.mesh_normals,
                      "shade meshes with their interpolated vertex normals (Phong), as some renderers do; not "
                      "physical: a milled part has only its geometry, which is what is traced by default");

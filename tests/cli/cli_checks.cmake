@@ -159,6 +159,21 @@ if(GROUP STREQUAL "errors")
     render "${valid}" --mesh "${DATA}/triangle.obj" --tracer heightfield --out out-heightfield-tracer-with-mesh-option)
   expect_input_error(heightfield-trace-key-with-meshes "trace.tracer"
     render "${DATA}/heightfield-with-mesh.json" --out out-heightfield-trace-key-with-meshes)
+  # A refractive mesh must bound a solid; --material takes refractive:IOR with IOR > 1.
+  expect_input_error(refractive-open-mesh "triangle.obj: a refractive mesh must be a closed solid, but it is not closed"
+    render "${valid}" --mesh "${DATA}/triangle.obj" --material refractive:1.5 --out out-refractive-open-mesh)
+  expect_input_error(refractive-inside-out "prism-inside-out.obj: a refractive mesh must be a closed solid, but it is inside out"
+    render "${valid}" --mesh "${DATA}/prism-inside-out.obj" --material refractive:1.5 --out out-refractive-inside-out)
+  expect_input_error(scene-refractive-open-mesh "triangle.obj: a refractive mesh must be a closed solid"
+    render "${DATA}/with-refractive-open-mesh.json" --out out-scene-refractive-open-mesh)
+  expect_input_error(material-unknown "--material: unknown material, got 'glass'"
+    render "${valid}" --mesh "${DATA}/prism.obj" --material glass --out out-material-unknown)
+  expect_input_error(material-not-a-number "got 'refractive:abc'"
+    render "${valid}" --mesh "${DATA}/prism.obj" --material refractive:abc --out out-material-not-a-number)
+  expect_input_error(material-index-below-one "got 'refractive:0.9'"
+    render "${valid}" --mesh "${DATA}/prism.obj" --material refractive:0.9 --out out-material-index-below-one)
+  expect_input_error(material-without-mesh "--material"
+    render "${valid}" --material refractive:1.5 --out out-material-without-mesh)
   expect_input_error(design-without-target "target"
     design "${valid}" --out out-design-without-target)
   expect_input_error(target-black-design "black.png"
@@ -241,6 +256,46 @@ elseif(GROUP STREQUAL "render")
     fail("render --heightmap: exit code ${rc}: ${err}")
   endif()
   expect_files("${WORK}/from-heightmap" irradiance.pfm metrics.json)
+
+  # A glass prism rendered as a refractive solid (--material): light straight down is
+  # totally reflected twice inside it and goes back up to the receiver, none of it lost.
+  foreach(t 1 2)
+    run(render-prism-${t} render "${valid}" --mesh "${DATA}/prism.obj" --material refractive:1.5 --out prism${t}
+        --threads ${t})
+    if(NOT rc STREQUAL "0")
+      fail("render --material refractive:1.5 --threads ${t}: exit code ${rc}: ${err}")
+    endif()
+  endforeach()
+  if(EXISTS "${WORK}/prism1/metrics.json")
+    file(READ "${WORK}/prism1/metrics.json" text)
+    string(JSON energy GET "${text}" energy)
+    string(JSON tir GET "${text}" where_light_went total_internal_reflection)
+    string(JSON ior ERROR_VARIABLE e GET "${text}" mesh_material refractive)
+    if(NOT (energy GREATER 0.99 AND energy LESS_EQUAL 1.000001))
+      fail("render prism: energy ${energy}, expected about 1 (retro-reflected by total internal reflection)")
+    endif()
+    if(NOT tir EQUAL 0)
+      fail("render prism: total_internal_reflection ${tir}: it is followed, never lost")
+    endif()
+    if(e OR NOT ior EQUAL 1.5)
+      fail("render prism: mesh_material.refractive is '${ior}' (${e})")
+    endif()
+  endif()
+  execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files "${WORK}/prism1/irradiance.pfm"
+                          "${WORK}/prism2/irradiance.pfm" RESULT_VARIABLE different)
+  if(different)
+    fail("render prism: irradiance.pfm differs between --threads 1 and --threads 2")
+  endif()
+  # The same kind of solid as a scene mesh, over half of a flat mirror.
+  run(render-scene-prism render "${DATA}/with-prism.json" --out scene-prism)
+  if(NOT rc STREQUAL "0")
+    fail("render with-prism.json: exit code ${rc}: ${err}")
+  elseif(EXISTS "${WORK}/scene-prism/metrics.json")
+    json_get(energy "${WORK}/scene-prism/metrics.json" energy)
+    if(NOT (energy GREATER 0.99 AND energy LESS_EQUAL 1.000001))
+      fail("render with-prism.json: energy ${energy}, expected about 1")
+    endif()
+  endif()
 
   # The same render twice, with one and with two threads: identical irradiance.
   run(render-1 render "${DATA}/with-target.json" --out threads1 --threads 1)

@@ -3,6 +3,7 @@
 // in). These carry the fabrication surface to CAD/CAM tools and meshes into the tracer.
 #include <array>
 #include <bit>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -308,6 +309,21 @@ inline TriangleMesh read_obj(const std::filesystem::path& file) {
     return mesh;
 }
 
+// The mesh with vertices at bit-identical positions merged (normals dropped): an OBJ
+// that repeats a corner per face (to give each face its own normal, say) becomes one
+// connected surface whose edges can be matched, as check_mesh needs.
+inline TriangleMesh welded(const TriangleMesh& mesh) {
+    TriangleMesh out;
+    detail::VertexWelder welder;
+    out.triangles.reserve(mesh.triangles.size());
+    for (const auto& t : mesh.triangles) {
+        std::array<std::int32_t, 3> w{};
+        for (int k = 0; k < 3; ++k) w[std::size_t(k)] = welder.index_of(mesh.vertices[std::size_t(t[std::size_t(k)])], out);
+        out.triangles.push_back(w);
+    }
+    return out;
+}
+
 // Writes a Wavefront OBJ with coordinates that read back bit-exact, 'vn' records when mesh.normals is
 // non-empty ("f a//a b//b c//c"), through a temporary file. Throws IoError naming the
 // file for an inconsistent mesh or a failed write.
@@ -385,6 +401,13 @@ inline TriangleMesh read_stl(const std::filesystem::path& file) {
     const bool starts_with_solid = first != std::string::npos && std::string_view(bytes).substr(first, 5) == "solid";
     if (!consistent_binary && starts_with_solid) return detail::read_stl_ascii(bytes, file);
     return detail::read_stl_binary(bytes, file);
+}
+
+// Reads a mesh file by its extension: .stl (binary or ASCII), anything else as OBJ.
+inline TriangleMesh read_mesh(const std::filesystem::path& file) {
+    std::string ext = file.extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext == ".stl" ? read_stl(file) : read_obj(file);
 }
 
 }  // namespace freeform::io

@@ -315,7 +315,8 @@ inline constexpr std::array<EnumName<Deposit>, 2> deposit_names{
     {{"bilinear", Deposit::bilinear}, {"nearest", Deposit::nearest}}};
 inline constexpr std::array<EnumName<TracerChoice>, 3> tracer_names{
     {{"auto", TracerChoice::automatic}, {"heightfield", TracerChoice::heightfield}, {"embree", TracerChoice::embree}}};
-inline constexpr std::array<EnumName<bool>, 2> mesh_material_names{{{"absorber", false}, {"mirror", true}}};
+inline constexpr std::array<EnumName<MeshKind>, 2> mesh_material_names{
+    {{"absorber", MeshKind::absorber}, {"mirror", MeshKind::mirror}}};
 inline constexpr std::array<EnumName<int>, 3> light_type_names{{{"collimated", 0}, {"point", 1}, {"disk", 2}}};
 
 // ---- blocks -----------------------------------------------------------------------
@@ -544,6 +545,26 @@ inline TargetSpec read_target(const json& j, const std::filesystem::path& base) 
     return t;
 }
 
+// "absorber", "mirror" or {"refractive": ior} (a closed solid, see MeshMaterial).
+inline MeshMaterial read_mesh_material(const json& v, const std::string& p) {
+    if (v.is_object()) {
+        const Object m(v, p);
+        static constexpr std::array<std::string_view, 1> keys{"refractive"};
+        m.only(keys, [](const std::string& k) -> std::optional<std::string> {
+            if (k == "thickness") return "a refractive mesh is a closed solid: its shape gives the thickness";
+            return std::nullopt;
+        });
+        const double ior = number(m.require("refractive"), m.at("refractive"));
+        if (!(ior > 1))
+            throw error(m.at("refractive"), "the refractive index must be > 1, got " + format_number(ior));
+        return MeshMaterial::refractive(ior);
+    }
+    if (v.is_string())
+        for (const auto& n : mesh_material_names)
+            if (n.name == v.get<std::string>()) return MeshMaterial{n.value, 1.49};
+    throw error(p, "expected \"absorber\", \"mirror\" or {\"refractive\": ior}, got " + describe(v));
+}
+
 inline std::vector<MeshSpec> read_meshes(const json& j, const std::filesystem::path& base) {
     if (!j.is_array())
         throw error("meshes", "expected an array of {\"file\": ..., \"material\": ...}, got " + describe(j));
@@ -554,7 +575,7 @@ inline std::vector<MeshSpec> read_meshes(const json& j, const std::filesystem::p
         o.only(keys);
         MeshSpec m;
         m.file = file_path(o.require("file"), o.at("file"), base);
-        if (const json* v = o.find("material")) m.mirror = enumeration(*v, o.at("material"), mesh_material_names);
+        if (const json* v = o.find("material")) m.material = read_mesh_material(*v, o.at("material"));
         meshes.push_back(std::move(m));
     }
     return meshes;
@@ -915,7 +936,9 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     }
     json meshes = json::array();
     for (const auto& m : s.meshes)
-        meshes.push_back(json{{"file", m.file.string()}, {"material", enum_name(m.mirror, mesh_material_names)}});
+        meshes.push_back(json{{"file", m.file.string()},
+                              {"material", m.material.is_refractive() ? json{{"refractive", m.material.ior}}
+                                                                      : json(enum_name(m.material.kind, mesh_material_names))}});
     out["meshes"] = meshes;
     out["trace"] = json{{"tracer", enum_name(s.trace.tracer, tracer_names)}, {"max_depth", s.trace.max_depth}};
     json opt = json::object();

@@ -4,6 +4,7 @@
 // back face lies `thickness` below the surface plane (at height -thickness), and light
 // refracts at both faces by Snell's law; total internal reflection is counted as lost.
 // Fresnel partial reflection is neglected (all light that can be transmitted is).
+#include <cstdint>
 #include <variant>
 
 namespace freeform {
@@ -18,5 +19,23 @@ struct Lens {
 using Material = std::variant<Mirror, Lens>;
 
 inline bool is_lens(const Material& m) { return std::holds_alternative<Lens>(m); }
+
+// What an extra mesh of a scene (its "meshes") does with the light that meets it. An
+// absorber blocks it; a mirror reflects it on both sides; a refractive mesh is the
+// closed, outward-oriented boundary of a solid of index `ior` in air: Snell's law at
+// every crossing, total internal reflection followed (not lost), Fresnel neglected as
+// for the lens. Refractive solids must not overlap or nest.
+enum class MeshKind : std::uint8_t { absorber, mirror, refractive };
+
+struct MeshMaterial {
+    MeshKind kind = MeshKind::absorber;
+    double ior = 1.49;  // refractive only
+
+    static MeshMaterial absorber() { return {MeshKind::absorber, 1.49}; }
+    static MeshMaterial mirror() { return {MeshKind::mirror, 1.49}; }
+    static MeshMaterial refractive(double n) { return {MeshKind::refractive, n}; }
+    bool is_mirror() const { return kind == MeshKind::mirror; }
+    bool is_refractive() const { return kind == MeshKind::refractive; }
+};
 
 }  // namespace freeform

@@ -160,4 +160,19 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
     return rays;
 }
 
+// Moves the origins of a collimated light's rays back along their direction to the
+// plane w = w_top (surface frame) where they start below it. Rays start just above the
+// surface's height bounds; geometry that rises higher (an imported solid) needs them to
+// start above it. The light is the same light: it comes from infinitely far away.
+// Point and disk lights start at their source, which no solid may hide.
+inline void start_collimated_above(const Light& light, double w_top, RaySet& rays) {
+    if (!std::holds_alternative<CollimatedLight>(light.shape)) return;
+    for (std::size_t k = 0; k < rays.origin.size(); ++k) {
+        const Vec3 o = rays.origin[k], d = rays.direction[k];
+        if (!(double(o.z) < w_top) || !(d.z < 0.0f)) continue;
+        const double t = (w_top - double(o.z)) / double(d.z);  // negative: back towards the light
+        rays.origin[k] = Vec3{float(double(o.x) + t * double(d.x)), float(double(o.y) + t * double(d.y)), float(w_top)};
+    }
+}
+
 }  // namespace freeform

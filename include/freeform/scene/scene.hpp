@@ -50,7 +50,7 @@ struct TargetSpec {
 // An extra triangle mesh in world coordinates (needs the Embree tracer).
 struct MeshSpec {
     std::filesystem::path file;
-    bool mirror = false;  // mirror, or an absorber that blocks light
+    MeshMaterial material{};  // absorber (default), mirror or refractive solid
 };
 
 enum class TracerChoice { automatic, heightfield, embree };

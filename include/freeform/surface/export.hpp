@@ -27,6 +27,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <utility>
@@ -410,6 +411,34 @@ inline MeshCheck check_mesh(const TriangleMesh& mesh) {
     r.manifold = r.non_manifold_edges == 0;
     r.closed = r.manifold && r.boundary_edges == 0 && !mesh.triangles.empty();
     return r;
+}
+
+// A refractive mesh must bound a solid, or the tracer cannot tell inside from outside:
+// closed (so manifold) and consistently oriented, with outward-facing triangles
+// (counter-clockwise seen from outside: a positive signed volume). Degenerate triangles
+// are harmless and allowed. Throws InputError naming `what` (a file name, say) and the
+// first failed condition.
+inline MeshCheck check_refractive_solid(const TriangleMesh& mesh, const std::string& what) {
+    const MeshCheck c = check_mesh(mesh);
+    const std::string prefix = what + ": a refractive mesh must be a closed solid, but ";
+    if (mesh.triangles.empty()) throw InputError(prefix + "it has no triangles");
+    if (!c.manifold)
+        throw InputError(prefix + std::to_string(c.non_manifold_edges) +
+                         " edge(s) are shared by three or more triangles (not manifold)");
+    if (!c.closed)
+        throw InputError(prefix + "it is not closed: " + std::to_string(c.boundary_edges) +
+                         " edge(s) belong to one triangle only (edges are matched by vertex index: shared "
+                         "corners must be one vertex)");
+    if (!c.oriented)
+        throw InputError(prefix + "its triangles are not consistently oriented (neighbours wind in opposite "
+                         "directions)");
+    if (!(c.volume > 0)) {
+        char volume[32];
+        std::snprintf(volume, sizeof volume, "%.3g", c.volume);
+        throw InputError(prefix + "it is inside out (signed volume " + volume +
+                         " m^3): its triangles must wind counter-clockwise seen from outside");
+    }
+    return c;
 }
 
 }  // namespace freeform

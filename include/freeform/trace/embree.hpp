@@ -1,7 +1,8 @@
 #pragma once
 // EmbreeTracer: traces the scene with Embree 3 instead of the BVH-free height-field walk,
 // so that the height field can share the scene with extra triangle meshes (mirrors that
-// fold the light, absorbers that block it) or be replaced by an imported mesh.
+// fold the light, absorbers that block it, closed refractive solids that it crosses) or
+// be replaced by an imported mesh, or be left out so that meshes alone are traced.
 //
 // The physics is not duplicated: Embree only finds the nearest admissible triangle of a
 // segment, and the shared `advance` (trace/path.hpp) does the rest, exactly as in
@@ -20,8 +21,10 @@
 // Rays are traced in 16-wide packets of consecutive ray ids (the ray set is a stratified
 // grid, so consecutive rays are coherent). Which triangles a segment may hit (not the one
 // it starts on; only the front of a mirror or of a lens seen from outside, only the back
-// from inside a lens) is decided per lane by an intersection filter that reads the
-// lane's state from an extended RTCIntersectContext.
+// from inside a lens; a refractive solid's outside from air, its inside from within) is
+// decided per lane by an intersection filter that reads the lane's state from an
+// extended RTCIntersectContext. Refractive meshes are CPU only: the CUDA policy traces
+// the height field alone, and path.hpp's crossing code is plain arithmetic either way.
 //
 // Triangle ids: the height field's triangles keep the kernel's ids
 // 2·(cj·(nx-1) + ci) + k; a surface mesh's triangles keep their index; the triangles of
@@ -45,6 +48,8 @@
 #include "../core/error.hpp"
 #include "../core/exec.hpp"
 #include "../scene/frame.hpp"
+#include "../scene/material.hpp"
+#include "../surface/export.hpp"
 #include "../surface/triangle_mesh.hpp"
 #include "heightfield_kernel.hpp"
 #include "tracer.hpp"
@@ -52,18 +57,21 @@
 namespace freeform {
 
 // A triangle mesh sharing the scene with the designed surface, in the SURFACE frame, with
-// one unit normal per vertex. A mirror mesh reflects (Phong-corrected with its vertex
-// normals) on both sides; any other mesh absorbs what hits it.
+// one unit normal per vertex. A mirror mesh reflects on both sides; an absorber absorbs
+// what hits it; a refractive mesh is the closed, outward-oriented boundary of a solid
+// (check_refractive_solid, surface/export.hpp), crossed by Snell's law. All are traced as
+// their flat facets unless PathParams::interpolated_normals asks for the vertex normals.
 struct ExtraMesh {
     TriangleMesh mesh;
-    bool mirror = false;
+    MeshMaterial material{};
 };
 
 // Moves a mesh given in world coordinates into the frame of the surface (the tracing
 // frame); vertex normals are computed when the mesh has none.
-inline ExtraMesh to_surface_frame(const TriangleMesh& world_mesh, const Frame& surface_frame, bool mirror) {
+inline ExtraMesh to_surface_frame(const TriangleMesh& world_mesh, const Frame& surface_frame,
+                                  const MeshMaterial& material) {
     ExtraMesh out;
-    out.mirror = mirror;
+    out.material = material;
     out.mesh.triangles = world_mesh.triangles;
     out.mesh.vertices.reserve(world_mesh.vertices.size());
     for (const Vec3d& p : world_mesh.vertices) out.mesh.vertices.push_back(surface_frame.to_local(p));
@@ -74,6 +82,9 @@ inline ExtraMesh to_surface_frame(const TriangleMesh& world_mesh, const Frame& s
         out.mesh.compute_normals();
     }
     return out;
+}
+inline ExtraMesh to_surface_frame(const TriangleMesh& world_mesh, const Frame& surface_frame, bool mirror) {
+    return to_surface_frame(world_mesh, surface_frame, mirror ? MeshMaterial::mirror() : MeshMaterial::absorber());
 }
 
 // An Embree device whose errors become exceptions. Embree reports errors through a
@@ -180,10 +191,14 @@ struct PacketContext {
     const GeometryInfo* geometries;
     std::int32_t exclude[packet_width];
     std::uint8_t front[packet_width];
+    std::uint8_t in_solid[packet_width];  // inside a refractive mesh's solid
 };
 
 // Rejects the triangle a segment starts on and, on the designed surface, triangles seen
-// from the wrong side. Extra meshes are two-sided.
+// from the wrong side. Mirror and absorbing meshes are two-sided. A refractive mesh is
+// met from outside by a ray in air and from inside by a ray in its solid (solids do not
+// nest): this also keeps a ray that crossed a facet near an edge from meeting the
+// neighbouring facet again at t ~ 0 on the wrong side.
 inline void intersect_filter(const RTCFilterFunctionNArguments* args) {
     const auto* ctx = reinterpret_cast<const PacketContext*>(args->context);
     const unsigned n = args->N;
@@ -199,13 +214,16 @@ inline void intersect_filter(const RTCFilterFunctionNArguments* args) {
             args->valid[i] = 0;
             continue;
         }
-        if (!g.one_sided) continue;
-        // Embree's Ng is (v1 - v0) x (v2 - v0), +w for the height field's triangles.
+        const bool solid = g.kind == HitKind::refractive_mesh;
+        if (!g.one_sided && !solid) continue;
+        // Embree's Ng is (v1 - v0) x (v2 - v0), +w for the height field's triangles and
+        // outward for a refractive solid.
         float dn = RTCRayN_dir_x(args->ray, n, i) * RTCHitN_Ng_x(args->hit, n, i) +
                    RTCRayN_dir_y(args->ray, n, i) * RTCHitN_Ng_y(args->hit, n, i) +
                    RTCRayN_dir_z(args->ray, n, i) * RTCHitN_Ng_z(args->hit, n, i);
         if (g.flip && g.flip[prim]) dn = -dn;
-        const bool ok = ctx->front[lane] ? dn < 0.0f : dn > 0.0f;
+        const bool front = solid ? ctx->in_solid[lane] == 0 : ctx->front[lane] != 0;
+        const bool ok = front ? dn < 0.0f : dn > 0.0f;
         if (!ok) args->valid[i] = 0;
     }
 }
@@ -316,6 +334,16 @@ public:
         meshes_.push_back(std::move(data));
         attach_mesh(0, 0);
         add_meshes(std::move(meshes), tris);
+        commit("rtcCommitScene");
+    }
+
+    // Traces `meshes` alone (surface frame), with no designed surface: a lens solid given
+    // as a refractive mesh, say, lit by the scene's rays. Only `rays` is referenced.
+    EmbreeTracer(const RaySet& rays, const PathParams& params, std::vector<ExtraMesh> meshes)
+        : surface_(nullptr), rays_(&rays), params_(params), tile_cells_(0) {
+        if (meshes.empty()) throw InputError("EmbreeTracer: no mesh to trace");
+        create_scene();
+        add_meshes(std::move(meshes), 0);
         commit("rtcCommitScene");
     }
 
@@ -450,6 +478,7 @@ private:
         std::vector<std::array<std::int32_t, 3>> tri;
         std::vector<std::uint8_t> flip;  // only for a traced surface mesh
         HitKind kind = HitKind::absorber;
+        float ior = 1;  // refractive meshes
     };
 
     struct NoPathVisitor {
@@ -634,8 +663,19 @@ private:
         for (std::size_t k = 0; k < meshes.size(); ++k) {
             TriangleMesh& m = meshes[k].mesh;
             if (m.normals.empty()) m.compute_normals();
-            MeshData d = to_mesh_data(m, "mesh " + std::to_string(k));
-            d.kind = meshes[k].mirror ? HitKind::mirror_mesh : HitKind::absorber;
+            const std::string what = "mesh " + std::to_string(k);
+            const MeshMaterial& material = meshes[k].material;
+            if (material.is_refractive()) {
+                if (!(material.ior > 1) || !std::isfinite(material.ior))
+                    throw InputError("EmbreeTracer: " + what + ": the refractive index must be > 1, got " +
+                                     std::to_string(material.ior));
+                check_refractive_solid(m, what);
+            }
+            MeshData d = to_mesh_data(m, what);
+            d.kind = material.is_refractive() ? HitKind::refractive_mesh
+                     : material.is_mirror()   ? HitKind::mirror_mesh
+                                              : HitKind::absorber;
+            d.ior = float(material.ior);
             meshes_.push_back(std::move(d));
         }
         for (std::size_t m = first; m < meshes_.size(); ++m) {
@@ -667,6 +707,7 @@ private:
             hit.tri = g.tri_offset + std::int32_t(prim);
             const MeshData& m = meshes_[std::size_t(g.mesh)];
             const auto& t = m.tri[prim];
+            hit.ior = m.ior;
             for (int k = 0; k < 3; ++k) {
                 hit.p[k] = m.p[std::size_t(t[std::size_t(k)])];
                 hit.n[k] = m.n[std::size_t(t[std::size_t(k)])];
@@ -720,6 +761,7 @@ private:
                 rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
                 ctx.exclude[k] = s.exclude;
                 ctx.front[k] = wants_front(s) ? 1 : 0;
+                ctx.in_solid[k] = s.medium > 1.0f ? 1 : 0;
             }
             rtcIntersect16(valid, scene_.get(), &ctx.base, &rh);
             for (int k = 0; k < w; ++k) {

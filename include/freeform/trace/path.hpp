@@ -89,13 +89,16 @@ FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixe
 }
 
 // The nearest hit of a segment on a triangle of the surface (or of an extra mesh).
-enum class HitKind : std::uint8_t { none, surface, mirror_mesh, absorber };
+// refractive_mesh: a facet of a closed, outward-oriented solid (scene/material.hpp,
+// MeshMaterial); the hit carries the solid's index.
+enum class HitKind : std::uint8_t { none, surface, mirror_mesh, absorber, refractive_mesh };
 
 struct SurfaceHit {
     float t = 0;
     std::int32_t tri = -1;  // triangle id within its geometry (excluded on the next segment)
     HitKind kind = HitKind::none;
     float b0 = 0, b1 = 0, b2 = 0;  // barycentric weights of the three vertices
+    float ior = 1;                 // refractive_mesh: the index of the solid
     Vec3 p[3];                     // vertex positions (valid when kind != none)
     Vec3 n[3];                     // unit vertex normals (valid when kind != none)
 };
@@ -161,6 +164,7 @@ struct PathState {
     Vec3 o{}, d{};
     std::int32_t exclude = -1;  // triangle the current segment starts on
     bool inside = false;        // inside the lens body
+    float medium = 1;           // index of the refractive mesh solid the ray is in; 1: in air
     std::uint8_t depth = 0;
     RayStatus status = RayStatus::active;
 };
@@ -187,7 +191,11 @@ namespace path_detail {
 // The segment met no surface: inside a lens it ends on the flat back face; otherwise the
 // ray has left the surface and ends on the receiver (or misses it).
 FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRecord& rec) {
-    if (s.inside) {
+    if (s.medium > 1.0f) {
+        // Inside a refractive solid and no facet ahead: the mesh leaks (a crack, or a
+        // facet missed through rounding at an edge). The light is lost, not let out.
+        s.status = RayStatus::absorbed;
+    } else if (s.inside) {
         const MaterialView& m = pp.material;
         if (!(s.d.z < 0.0f)) {
             s.status = RayStatus::absorbed;  // leaves through a side wall
@@ -220,6 +228,25 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
     return false;
 }
 
+// A crossing of a refractive mesh's facet at s.o, with m the (not unit) normal to shade
+// with. The facet's winding says which side is outside: the ray enters when it travels
+// against the facet normal. Solids sit in air (they do not nest), so leaving goes back
+// to index 1. Total internal reflection is followed: the ray stays inside, reflected.
+FREEFORM_HD inline void refractive_crossing(PathState& s, const SurfaceHit& hit, Vec3 m) {
+    const Vec3 facet = cross(hit.p[1] - hit.p[0], hit.p[2] - hit.p[0]);
+    const bool entering = dot(s.d, facet) < 0.0f;
+    const float from = entering ? s.medium : hit.ior;
+    const float to = entering ? hit.ior : 1.0f;
+    const Vec3 ns = m * (1.0f / std::sqrt(dot(m, m)));
+    Vec3 out;
+    if (refract(s.d, ns, from, to, out)) {
+        s.d = normalize(out);
+        s.medium = to;
+    } else {
+        s.d = s.d - (2.0f * dot(s.d, ns)) * ns;
+    }
+}
+
 }  // namespace path_detail
 
 // Given the nearest hit of the current segment (kind none when there is none), moves the
@@ -248,6 +275,10 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
                                            : patch_normal(hit, flat, alpha);
     s.o = phong_point(hit, flat, alpha);
     s.exclude = hit.tri;
+    if (hit.kind == HitKind::refractive_mesh) {
+        path_detail::refractive_crossing(s, hit, m);
+        return true;
+    }
     if (hit.kind == HitKind::mirror_mesh || !pp.material.lens) {
         // d - 2 (d·n) n with n = m / |m|, written without the square root and the two
         // normalisations: |d| stays 1 up to rounding.
