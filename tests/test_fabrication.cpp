@@ -142,7 +142,7 @@ TEST_CASE("the exported mesh traced as flat triangles gives the design's irradia
         s.receiver.size = {0.3, 0.3};
         check_exported_matches(s, 51, 0.02);
     }
-    SUBCASE("lens front face over the model's back face") {
+    SUBCASE("lens: the exported closed solid, traced as a refractive mesh") {
         s.surface.material = Lens{1.49, 0.01};
         s.surface.h_min = -0.008, s.surface.h_max = 0.008;
         s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");

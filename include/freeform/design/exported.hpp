@@ -3,10 +3,16 @@
 // Embree as the flat triangles a mill produces: no Phong correction, no vertex normals.
 // Needs freeform::embree.
 //
-// A mirror's sheet is traced in place of the height field. A lens's solid is its
-// tessellated front face over the flat back face and absorbing side walls of the lens
-// model; the front face is traced as a mesh and the model supplies the rest, so the
-// comparison isolates what the export changes: the facets of the front face.
+// A mirror's sheet is traced in place of the height field. A lens is traced as its
+// exported closed solid (lens_solid: front facets, flat back face, side walls), a
+// refractive mesh with Snell at every crossing and total internal reflection followed:
+// what a milled or printed lens does, including the light that leaves through the side
+// walls, which the design's lens model counts as lost.
+#include <algorithm>
+#include <limits>
+#include <optional>
+#include <vector>
+
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/export.hpp"
@@ -23,13 +29,29 @@ struct ExportedTrace {
 template <HostPolicy P>
 ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
                              const RaySet& rays) {
-    const TriangleMesh front = tessellate_surface(surface, float(scene.surface.phong_alpha), subdivisions, false);
     PathParams pp = make_path_params(scene);
     pp.phong_alpha = 0.0f;  // flat facets: the mesh is its geometry
     pp.interpolated_normals = false;
-    EmbreeTracer tracer(front, rays, pp);
+    const float alpha = float(scene.surface.phong_alpha);
+    RaySet lens_rays;  // outlives the tracer, which refers to it
+    std::optional<EmbreeTracer> tracer;
+    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) {
+        // The solid replaces the lens model; a collimated beam starts above its top.
+        TriangleMesh solid = lens_solid(surface, *lens, alpha, subdivisions, false);
+        double top = -std::numeric_limits<double>::infinity();
+        for (const Vec3d& p : solid.vertices) top = std::max(top, p.z);
+        lens_rays = rays;
+        start_collimated_above(scene.light, top + 1e-6 * std::max(scene.surface.size.x, scene.surface.size.y),
+                               lens_rays);
+        pp.material = MaterialView{};
+        std::vector<ExtraMesh> meshes;
+        meshes.push_back(ExtraMesh{std::move(solid), MeshMaterial::refractive(lens->ior)});
+        tracer.emplace(lens_rays, pp, std::move(meshes));
+    } else {
+        tracer.emplace(tessellate_surface(surface, alpha, subdivisions, false), rays, pp);
+    }
     ExportedTrace out{Histogram(scene.receiver.width, scene.receiver.height), {}};
-    tracer.trace_all(policy, out.histogram, out.totals);
+    tracer->trace_all(policy, out.histogram, out.totals);
     return out;
 }
 
