@@ -440,7 +440,7 @@ TEST_CASE("a callback returning true stops the design; the result holds a valid 
 
 // ------------------------------------------------------------------------- end to end
 
-TEST_CASE("designing the irradiance of a known smooth surface gets within 0.05 of it") {
+TEST_CASE("designing the irradiance of a known smooth surface gets within 0.06 of it") {
     // The target is what a gently convex mirror (a paraboloid with a 2 m focal length,
     // which widens the flat mirror's spot by a quarter) throws onto a 20 x 20 receiver:
     // a solution with zero error exists (up to ray noise, about 0.006 here), and the
@@ -458,20 +458,22 @@ TEST_CASE("designing the irradiance of a known smooth surface gets within 0.05 o
     o.time_budget = 0;
     o.seed = 1;
     o.threads = 1;
-    // Default settings; one level with 4000 iterations per kernel stage (after the
-    // bandit's trial run). Measured over seeds 1-6: 0.027 to 0.040. (A 0.6 mm Gaussian
-    // bump as the truth gave 0.024 to 0.051 with this budget, 0.021 to 0.043 with 5000.)
+    // Default settings; one level of 12000 iterations (after the bandit's trial run).
+    // Measured over seeds 1-6 since hits are shaded with the Phong patch's true normal
+    // (which, unlike the interpolated normal, turns at patch edges): 0.039 to 0.051 with
+    // 8000 iterations, 0.039 to 0.048 with 12000, 0.030 to 0.050 with 16000 -- a plateau
+    // near 0.04, six times the noise floor. (With interpolated normals: 0.027 to 0.040.)
     LevelPlan level;
     level.mesh_x = level.mesh_y = 21;
     level.resolution_x = level.resolution_y = 20;
-    level.iterations = 8000;
+    level.iterations = 12000;
     o.levels = {level};
     const double flat = error_of(s, surface_for(s, 21), target, o.seed);
     CHECK(flat > 0.25);
     CHECK(error_of(s, truth, target, o.seed) < 0.01);  // the noise floor
     const DesignResult r = design(s, surface_for(s, 21), target, o, never_stop());
-    CHECK(r.iterations == o.preprocess_iterations + 8000);
-    CHECK(r.value.error <= 0.05);
+    CHECK(r.iterations == o.preprocess_iterations + 12000);
+    CHECK(r.value.error <= 0.06);
     CHECK(r.value.energy > 0.95);
     // The reported error is that of the returned surface.
     CHECK(error_of(s, r.surface, target, o.seed) == doctest::Approx(r.value.error).epsilon(1e-12));

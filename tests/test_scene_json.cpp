@@ -39,7 +39,7 @@ json full_scene() {
         "surface": {"center": [0.01, 0.02, 0.03], "normal": [0, 0, 2], "up": [0, 3, 0],
                     "size": [0.12, 0.08], "mesh": [61, 41], "height_bounds": [-0.002, 0.004],
                     "aperture": "ellipse", "material": {"refractive": 1.5, "thickness": 0.02},
-                    "phong_alpha": 0.5, "initial": {"paraboloid": {"focal_length": 0.7}}},
+                    "phong_alpha": 0.6, "initial": {"paraboloid": {"focal_length": 0.7}}},
         "receiver": {"center": [0, 0, -0.4], "normal": [0, 0, 1], "up": [1, 0, 0],
                      "size": [0.3, 0.25], "resolution": [120, 100], "deposit": "nearest"},
         "target": {"text": "Q", "font": "DejaVuSans", "margin": 0.2},
@@ -101,7 +101,7 @@ TEST_CASE("a minimal scene gets every documented default") {
     CHECK(s.surface.h_max == 0.005);
     CHECK(s.surface.aperture == Aperture::rect);
     CHECK(std::holds_alternative<Mirror>(s.surface.material));
-    CHECK(s.surface.phong_alpha == 0.75);
+    CHECK(s.surface.phong_alpha == 0.5);
     CHECK(s.surface.initial_pfm.empty());
     CHECK_FALSE(s.surface.initial_paraboloid.has_value());
 
@@ -147,7 +147,7 @@ TEST_CASE("a full scene parses with the values it states") {
     const auto& lens = std::get<Lens>(s.surface.material);
     CHECK(lens.ior == 1.5);
     CHECK(lens.thickness == 0.02);
-    CHECK(s.surface.phong_alpha == 0.5);
+    CHECK(s.surface.phong_alpha == 0.6);
     REQUIRE(s.surface.initial_paraboloid.has_value());
     CHECK(s.surface.initial_paraboloid->focal_length == 0.7);
 

@@ -24,6 +24,7 @@
 #include <nlohmann/json.hpp>
 
 #include <freeform/design/designer.hpp>
+#include <freeform/design/fabrication.hpp>
 #include <freeform/design/report_json.hpp>
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>

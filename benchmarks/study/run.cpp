@@ -295,6 +295,22 @@ int run(const Args& a) {
     const Evaluation final_eval = evaluate(judge, result_surface, alpha, target, eval_seed, a.threads);
     out["final"] = evaluation_json(final_eval);
     out["final"]["heights_fingerprint"] = heights_fingerprint(result_surface);
+#if defined(FREEFORM_WITH_EMBREE)
+    {
+        // What the milled part does: the exported mesh ("auto" subdivision, as `freeform
+        // design` writes it) traced as flat triangles, same rays.
+        Scene fab_scene = judge;
+        fab_scene.surface.phong_alpha = alpha;
+        const Fabrication fab = make_fabrication(fab_scene, result_surface);
+        const TriangleMesh front = tessellate_surface(result_surface, float(alpha), fab.subdivisions, false);
+        const Evaluation e = evaluate_with(judge, result_surface, 0.0, target, eval_seed, a.threads, 1.0,
+                                           [&](const Heightmap&, const RaySet& r, const PathParams& p) {
+                                               return EmbreeTracer(front, r, p);
+                                           });
+        out["final"]["error_exported"] = e.error;
+        out["final"]["export_subdivisions"] = fab.subdivisions;
+    }
+#endif
     if (a.check_render) {
         // Judged again on 4x the rays with a fresh jitter: does the design fit the light,
         // or the particular rays it was optimised with?
