@@ -32,7 +32,8 @@ def main():
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--scenes", nargs="+", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--extra", nargs="*", default=[], help="extra freeform_mpi options")
+    ap.add_argument("--ladder-ratio", type=float, default=None, help="freeform_mpi --ladder-ratio")
+    ap.add_argument("--exchange-every", type=int, default=None, help="freeform_mpi --exchange-every")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     rows = []
@@ -49,7 +50,11 @@ def main():
                     cmd = [os.path.join(a.bin, "freeform")] + common
                 else:
                     cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(ranks),
-                           os.path.join(a.bin, "freeform_mpi")] + common + a.extra
+                           os.path.join(a.bin, "freeform_mpi")] + common
+                    if a.ladder_ratio is not None:
+                        cmd += ["--ladder-ratio", str(a.ladder_ratio)]
+                    if a.exchange_every is not None:
+                        cmd += ["--exchange-every", str(a.exchange_every)]
                 t0 = time.monotonic()
                 p = subprocess.run(cmd, capture_output=True, text=True)
                 wall = time.monotonic() - t0

@@ -260,10 +260,15 @@ public:
         detail::check(MPI_Bcast(&t, 1, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
         return t;
     }
+    // The mean of the ranks' budgets. In a time-budgeted design each rank fits its budget
+    // to the speed it measured in a short calibration, which is noisy where ranks share
+    // cores (one rank descheduled during its calibration measures a fraction of the real
+    // speed): the minimum would let that rank starve every replica. The stage's time
+    // limit is enforced at the exchange points anyway.
     std::int64_t common_budget(std::int64_t b) const {
-        std::int64_t out = b;
-        detail::check(MPI_Allreduce(&b, &out, 1, MPI_INT64_T, MPI_MIN, comm_), "MPI_Allreduce");
-        return out;
+        std::int64_t sum = 0;
+        detail::check(MPI_Allreduce(&b, &sum, 1, MPI_INT64_T, MPI_SUM, comm_), "MPI_Allreduce");
+        return std::max<std::int64_t>(1, sum / size_);
     }
     bool any(bool b) const {
         int in = b ? 1 : 0, out = 0;
