@@ -10,6 +10,9 @@ freeform=$1 freeform_mpi=$2 mpiexec=$3 scene=$4 work=$5
 # Root in CI containers, and more ranks than cores on small machines.
 mpirun=("$mpiexec" --allow-run-as-root --oversubscribe)
 export OMPI_MCA_rmaps_base_oversubscribe=1
+# Containers often forbid the cross-memory attach Open MPI's shared-memory transport uses
+# for large messages (the winner's result); copy through shared memory instead.
+export OMPI_MCA_btl_vader_single_copy_mechanism=none
 rm -rf "$work" && mkdir -p "$work" && cd "$work" || exit 1
 failures=0
 fail() { echo "FAILED: $*"; failures=$((failures + 1)); }
