@@ -11,6 +11,7 @@ packages=(
     make cmake ninja-build g++
     libeigen3-dev libembree-dev doctest-dev libstb-dev libcli11-dev nlohmann-json3-dev
     libbenchmark-dev libomp-dev
+    libopenmpi-dev openmpi-bin
     fonts-dejavu-core python3 python3-matplotlib
 )
 for arg in "$@"; do

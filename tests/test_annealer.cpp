@@ -15,6 +15,9 @@
 #include <utility>
 #include <vector>
 
+using freeform::AnnealExchange;
+using freeform::GeometricSchedule;
+using freeform::validate_anneal_options;
 using freeform::AnnealOptions;
 using freeform::AnnealResult;
 using freeform::AnnealState;
@@ -656,4 +659,76 @@ TEST_CASE("stop reasons have names") {
     CHECK(std::string(freeform::to_string(StopReason::stall)) == "stall");
     CHECK(std::string(freeform::to_string(StopReason::min_temperature)) == "min_temperature");
     CHECK(std::string(freeform::to_string(StopReason::callback)) == "callback");
+}
+
+namespace {
+
+// An exchange hook that records what it saw and sets the scale it is told to.
+struct ExchangeRecorder {
+    std::vector<AnnealExchange> seen;
+    double set_scale = 0;  // 0: leave the scale alone
+    std::int64_t stop_at = -1;
+    bool exchange(AnnealExchange& x) {
+        seen.push_back(x);
+        if (set_scale > 0) x.temperature_scale = set_scale;
+        return x.state.iteration == stop_at;
+    }
+};
+
+}  // namespace
+
+TEST_CASE("exchange hooks: called every exchange_every iterations; scale 1 leaves the trajectory unchanged") {
+    AnnealOptions o = rastrigin_options(7);
+    o.max_iterations = 3000;
+    o.patience = 400;
+    const auto plain = [&] {
+        Rastrigin p(3);
+        freeform::anneal(p, o);
+        return p;
+    }();
+    for (int speculative : {1, 4}) {
+        CAPTURE(speculative);
+        AnnealOptions e = o;
+        e.exchange_every = 70;
+        e.speculative = speculative;
+        e.threads = 1;
+        Rastrigin p(3);
+        ExchangeRecorder rec;
+        const AnnealResult r = freeform::anneal(p, e, rec);
+        CHECK(r.iterations == 3000);
+        CHECK(p.accepted == plain.accepted);
+        REQUIRE(rec.seen.size() == std::size_t(3000 / 70));
+        for (std::size_t k = 0; k < rec.seen.size(); ++k) {
+            CHECK(rec.seen[k].state.iteration == std::int64_t(70 * (k + 1)));
+            CHECK(rec.seen[k].temperature_scale == 1.0);
+        }
+    }
+}
+
+TEST_CASE("exchange hooks: a new temperature scale multiplies every later temperature") {
+    AnnealOptions o = rastrigin_options(7);
+    o.max_iterations = 1000;
+    o.patience = 0;
+    o.exchange_every = 100;
+    o.temperature_scale = 2.0;
+    Rastrigin p(3);
+    ExchangeRecorder rec;
+    rec.set_scale = 3.0;
+    rec.stop_at = 500;
+    const AnnealResult r = freeform::anneal(p, o, rec);
+    CHECK(r.reason == StopReason::callback);
+    CHECK(r.iterations == 500);
+    REQUIRE(rec.seen.size() == 5);
+    const GeometricSchedule g;
+    // The first point runs at the initial scale; later ones at the scale the hook set.
+    CHECK(rec.seen[0].temperature_scale == 2.0);
+    CHECK(rec.seen[0].state.temperature == doctest::Approx(2.0 * g.temperature(10.0, 0.9, 0)));
+    CHECK(rec.seen[1].temperature_scale == 3.0);
+    CHECK(rec.seen[1].state.temperature == doctest::Approx(3.0 * g.temperature(10.0, 0.9, 0)));
+    AnnealOptions bad = o;
+    bad.temperature_scale = 0;
+    CHECK_THROWS_AS(validate_anneal_options(bad), InputError);
+    bad = o;
+    bad.exchange_every = -1;
+    CHECK_THROWS_AS(validate_anneal_options(bad), InputError);
 }

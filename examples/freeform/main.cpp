@@ -4,6 +4,11 @@
 //                   [--tracer T] [--threads N]
 //   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
 //
+// Built with MPI (CMake finds it) the same source also makes `freeform_mpi`: run under
+// `mpirun -np N freeform_mpi design ...` it designs by replica exchange, one replica per
+// rank (freeform/mpi/replica_exchange.hpp); rank 0 alone prints and writes the outputs.
+// The plain `freeform` never needs an MPI runtime.
+//
 // Bad input (a scene key, a file, an option) prints one line on stderr and exits with 2;
 // all input is read and checked before any output file is written.
 #include <unistd.h>
@@ -38,6 +43,11 @@
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/select.hpp>
 #include <freeform/trace/setup.hpp>
+#if defined(FREEFORM_WITH_MPI)
+#include <cstdlib>
+
+#include <freeform/mpi/replica_exchange.hpp>
+#endif
 #if defined(FREEFORM_WITH_EMBREE)
 #include <freeform/design/exported.hpp>
 #include <freeform/trace/embree.hpp>
@@ -56,6 +66,10 @@ std::atomic<bool> interrupted{false};
 extern "C" void on_sigint(int) { interrupted.store(true); }
 
 bool stderr_is_terminal() { return ::isatty(2) == 1; }
+
+// This process's rank and the number of ranks (0 and 1 without MPI).
+int world_rank = 0;
+int world_size = 1;
 
 // One self-overwriting status line on a terminal, at most ten updates a second.
 class StatusLine {
@@ -246,6 +260,8 @@ struct RenderArgs {
 };
 
 int run_render(const RenderArgs& a) {
+    // Under mpirun every rank would render the same: rank 0 does it alone.
+    if (world_rank != 0) return 0;
     Scene scene = io::load_scene(a.scene);
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
     check_output_dir(a.out);
@@ -387,7 +403,18 @@ struct DesignArgs {
     std::optional<int> threads;
     bool quiet = false;
     bool start_only = false;
+    double ladder_ratio = 1.5;        // freeform_mpi only
+    std::int64_t exchange_every = 500;  // freeform_mpi only
 };
+
+#if defined(FREEFORM_WITH_MPI)
+// Test hook: FREEFORM_TEST_ABORT_RANK=k makes rank k die (std::abort) at its first
+// progress report, to check that a dead rank ends the run without output files.
+bool abort_requested_here() {
+    const char* v = std::getenv("FREEFORM_TEST_ABORT_RANK");
+    return v && *v && std::atoi(v) == world_rank;
+}
+#endif
 
 int run_design(const DesignArgs& a) {
     Scene scene = io::load_scene(a.scene);
@@ -411,14 +438,27 @@ int run_design(const DesignArgs& a) {
         flat_footprint(scene, initial);
 
     std::signal(SIGINT, on_sigint);
-    StatusLine status(!a.quiet);
-    if (!a.quiet)
+    // With replicas, rank 0 alone reports: the other ranks run quiet.
+    const bool quiet = a.quiet || world_rank != 0;
+    StatusLine status(!quiet);
+    if (!quiet)
         std::printf("designing %s: %d x %d mesh, %d x %d receiver, %.0f s budget, seed %llu\n", a.scene.string().c_str(),
                     nx, ny, scene.receiver.width, scene.receiver.height, options.time_budget,
                     (unsigned long long)options.seed);
     DesignOptions run_options = options;
     run_options.progress_every = 500;
     DesignResult result;
+#if defined(FREEFORM_WITH_MPI)
+    mpi::ReplicaOptions replica_options;
+    replica_options.ladder_ratio = a.ladder_ratio;
+    replica_options.exchange_every = a.exchange_every;
+    mpi::validate(replica_options);
+    mpi::Replicas replicas(MPI_COMM_WORLD, options.seed, replica_options);
+    const bool abort_here = abort_requested_here();
+    int winner = 0;
+    std::vector<double> replica_objectives;
+    std::int64_t iterations_all = 0;
+#endif
     if (a.start_only) {
         // The start alone (the transport surface, or whatever the scene starts from).
         const auto t0 = std::chrono::steady_clock::now();
@@ -429,16 +469,34 @@ int run_design(const DesignArgs& a) {
         result.surface = std::move(start.surface);
         result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     } else {
-        if (!a.quiet) status.show("finding the start (" + requested_start(scene) + ")");
-        result = design(scene, std::move(initial), target, run_options, [&](const DesignProgress& p) {
+        if (!quiet) status.show("finding the start (" + requested_start(scene) + ")");
+        const auto progress = [&](const DesignProgress& p) {
+#if defined(FREEFORM_WITH_MPI)
+            if (abort_here) {
+                std::fprintf(stderr, "freeform: rank %d: dying on purpose (FREEFORM_TEST_ABORT_RANK)\n", world_rank);
+                std::abort();
+            }
+#endif
             status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
                         std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
                         fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
                         fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
                         " it/s | " + fixed(p.time_left, 1) + " s left");
             return interrupted.load();
-        });
+        };
+#if defined(FREEFORM_WITH_MPI)
+        result = design(scene, std::move(initial), target, run_options, progress, default_penalties(run_options),
+                        replicas);
+        iterations_all = replicas.sum_on_root(result.iterations);
+        winner = replicas.gather_best(result, &replica_objectives);
+#else
+        result = design(scene, std::move(initial), target, run_options, progress);
+#endif
     }
+#if defined(FREEFORM_WITH_MPI)
+    // Only rank 0 goes on to evaluate and write the winner's design.
+    if (world_rank != 0) return result.stopped_early ? 130 : 0;
+#endif
     status.finish();
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
@@ -483,6 +541,34 @@ int run_design(const DesignArgs& a) {
     m["levels"] = stage_reports_json(result.stages);
     m["start"] = start_report_json(result.start);
     m["effective_scene"] = scene_to_json(scene);
+#if defined(FREEFORM_WITH_MPI)
+    {
+        json r;
+        r["ranks"] = world_size;
+        r["ladder"] = "geometric";
+        r["ladder_ratio"] = replica_options.ladder_ratio;
+        json scales = json::array();
+        for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
+        r["rung_temperature_scales"] = scales;
+        r["exchange"] = "temperatures";
+        r["exchange_every"] = replica_options.exchange_every;
+        r["exchange_points"] = replicas.exchange_points();
+        json pairs = json::array();
+        for (const auto& p : replicas.pairs())
+            pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
+                             {"proposed", p.proposed},
+                             {"accepted", p.accepted},
+                             {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
+        r["pairs"] = pairs;
+        r["winner_rank"] = winner;
+        r["winner_final_rung"] = replicas.rungs()[std::size_t(winner)];
+        r["final_rungs"] = replicas.rungs();
+        r["objectives"] = replica_objectives;
+        r["iterations_all_ranks"] = iterations_all;
+        r["seeds"] = "rank 0: the seed's own streams; rank r: hash(stage seed, r)";
+        m["replicas"] = r;
+    }
+#endif
 
     std::ostringstream csv;
     csv << "seconds,iteration,level,stage,error,energy,objective,temperature\n";
@@ -493,7 +579,7 @@ int run_design(const DesignArgs& a) {
     const ImageD irradiance = hist.to_image();
     const ImageD target_img = target_image_of(t);
     // The exported part, and what it does when traced as its flat facets.
-    if (!a.quiet) status.show("exporting the surface and tracing the exported mesh");
+    if (!quiet) status.show("exporting the surface and tracing the exported mesh");
     const Fabrication fabrication = make_fabrication(scene, result.surface);
     const TriangleMesh& fab = fabrication.mesh;
     json exported;
@@ -559,9 +645,8 @@ int run_design(const DesignArgs& a) {
     return result.stopped_early ? 130 : 0;
 }
 
-}  // namespace
 
-int main(int argc, char** argv) {
+int cli_main(int argc, char** argv) {
     CLI::App app{"freeform: design freeform reflectors and lenses that throw a target image onto a plane.\n"
                  "Scene files are described in docs/scene.md.",
                  "freeform"};
@@ -602,6 +687,14 @@ int main(int argc, char** argv) {
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
     design_cmd->add_flag("--start-only", da.start_only,
                          "write the start surface alone (the transport surface by default), without annealing");
+#if defined(FREEFORM_WITH_MPI)
+    design_cmd->add_option("--ladder-ratio", da.ladder_ratio,
+                           "replica exchange: temperature scale of rung k is RATIO^k (default 1.5)")
+        ->check(CLI::Range(1.0, 1e6));
+    design_cmd->add_option("--exchange-every", da.exchange_every,
+                           "replica exchange: iterations between exchanges (default 500)")
+        ->check(CLI::Range(std::int64_t{1}, std::numeric_limits<std::int64_t>::max()));
+#endif
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");
 
@@ -615,17 +708,45 @@ int main(int argc, char** argv) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
         // One line, like every other input error (CLI11's own report adds a help hint).
-        std::fprintf(stderr, "freeform: %s (see freeform --help)\n", e.what());
+        if (world_rank == 0) std::fprintf(stderr, "freeform: %s (see freeform --help)\n", e.what());
         return 2;
     }
     try {
         if (*render) return run_render(ra);
         return run_design(da);
     } catch (const InputError& e) {
-        std::fprintf(stderr, "freeform: %s\n", e.what());
+        // Every rank reads the same input and finds the same error: one message.
+        if (world_rank == 0) std::fprintf(stderr, "freeform: %s\n", e.what());
         return 2;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "freeform: internal error: %s\n", e.what());
+        if (world_size > 1)
+            std::fprintf(stderr, "freeform: rank %d: internal error: %s\n", world_rank, e.what());
+        else
+            std::fprintf(stderr, "freeform: internal error: %s\n", e.what());
         return 1;
     }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+#if defined(FREEFORM_WITH_MPI)
+    // OpenMP threads evaluate moves; only the main thread calls MPI.
+    int provided = 0;
+    if (MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS) {
+        std::fprintf(stderr, "freeform: MPI_Init_thread failed\n");
+        return 1;
+    }
+    MPI_Comm_rank(MPI_COMM_WORLD, &world_rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &world_size);
+    // Rank 0 alone prints results (and help); the others' stdout goes nowhere.
+    if (world_rank != 0 && !std::freopen("/dev/null", "w", stdout)) return 1;
+    const int rc = cli_main(argc, argv);
+    // An internal error on one rank may leave the others waiting in a collective.
+    if (rc == 1 && world_size > 1) MPI_Abort(MPI_COMM_WORLD, 1);
+    MPI_Finalize();
+    return rc;
+#else
+    return cli_main(argc, argv);
+#endif
 }

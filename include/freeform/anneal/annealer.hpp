@@ -61,6 +61,13 @@
 //                                 when the problem does not sync)
 //   new_best(const AnnealState&)  after an accepted move that gives a new best energy
 //   end(const AnnealState&)       after the run, once the problem holds its best state
+//   exchange(AnnealExchange&)     every options.exchange_every iterations (only when some
+//                                 callback has this hook): it sees the current energy and
+//                                 temperature and may set a new temperature scale, the
+//                                 factor every later temperature of the run is multiplied
+//                                 by (re-heats included). This is the hook of replica
+//                                 exchange (freeform/mpi/): replicas at a ladder of scales
+//                                 swap their temperatures; nothing here knows about them.
 // A hook that returns a value convertible to bool stops the run after that point when
 // it returns true (end's value is ignored). Every callback is called in the order given,
 // even when an earlier one asked to stop.
@@ -122,6 +129,14 @@ struct AnnealOptions {
     // batch callbacks every batch_iterations when the problem has no sync points (0 = none).
     std::int64_t progress_every = 0;
     std::int64_t batch_iterations = 1000;
+
+    // Temperature scale: every temperature the schedule gives is multiplied by it (1 =
+    // the schedule's own, exactly). An exchange hook may change it during the run.
+    double temperature_scale = 1.0;
+    // Iterations between calls of the callbacks' exchange hooks (0 = never). Like sync
+    // points, exchange points bound speculative windows, so they do not change the
+    // trajectory by themselves.
+    std::int64_t exchange_every = 0;
 };
 
 enum class StopReason { max_iterations, time_budget, target_energy, stall, min_temperature, callback };
@@ -148,6 +163,12 @@ struct AnnealState {
     double seconds = 0;         // since the run started
     double iterations_per_second = 0;
     int reheats = 0;
+};
+
+// What an exchange hook sees and may change (AnnealOptions::exchange_every).
+struct AnnealExchange {
+    AnnealState state;               // state.temperature: the next iteration's, scale included
+    double temperature_scale = 1.0;  // in: the current scale; out: the scale from now on (> 0)
 };
 
 // What happened since the previous sync/batch point.
@@ -263,8 +284,11 @@ template <class C>
 concept HasEndHook = requires(C& c, const AnnealState& s) { c.end(s); };
 
 template <class C>
-concept AnnealCallback =
-    HasBeginHook<C> || HasProgressHook<C> || HasBatchHook<C> || HasNewBestHook<C> || HasEndHook<C>;
+concept HasExchangeHook = requires(C& c, AnnealExchange& x) { c.exchange(x); };
+
+template <class C>
+concept AnnealCallback = HasBeginHook<C> || HasProgressHook<C> || HasBatchHook<C> || HasNewBestHook<C> ||
+                         HasEndHook<C> || HasExchangeHook<C>;
 
 // Calls a hook; true when it returned something that converts to true.
 template <class F>
@@ -313,6 +337,10 @@ inline void validate_anneal_options(const AnnealOptions& o) {
         fail("progress_every must be ≥ 0 (0 = only at the end), got " + std::to_string(o.progress_every));
     if (o.batch_iterations < 0)
         fail("batch_iterations must be ≥ 0 (0 = none), got " + std::to_string(o.batch_iterations));
+    if (!std::isfinite(o.temperature_scale) || o.temperature_scale <= 0)
+        fail("temperature_scale must be a finite number > 0, got " + option_value(o.temperature_scale));
+    if (o.exchange_every < 0)
+        fail("exchange_every must be ≥ 0 (0 = never), got " + std::to_string(o.exchange_every));
 }
 
 namespace anneal_detail {
@@ -345,6 +373,10 @@ public:
     AnnealResult run(Cs&... callbacks) {
         start_ = std::chrono::steady_clock::now();
         pass_t0_ = options_.initial_temperature;
+        scale_ = options_.temperature_scale;
+        if constexpr ((HasExchangeHook<Cs> || ...)) {
+            if (options_.exchange_every > 0) next_exchange_ = options_.exchange_every;
+        }
         energy_ = static_cast<double>(problem_.energy());
         best_ = energy_;
         if (options_.progress_every > 0) next_progress_ = options_.progress_every;
@@ -421,6 +453,11 @@ private:
         return false;
     }
     template <class C>
+    static bool hook_exchange(C& c, AnnealExchange& x) {
+        if constexpr (HasExchangeHook<C>) return stop_requested([&] { return c.exchange(x); });
+        return false;
+    }
+    template <class C>
     static bool hook_new_best(C& c, const AnnealState& s) {
         if constexpr (HasNewBestHook<C>) return stop_requested([&] { return c.new_best(s); });
         return false;
@@ -436,7 +473,9 @@ private:
         const std::int64_t step = (j - pass_start_) / options_.iterations_per_temperature;
         if (step != cached_step_) {
             cached_step_ = step;
-            cached_temperature_ = static_cast<double>(schedule_.temperature(pass_t0_, options_.cooling, step));
+            // × 1.0 leaves the schedule's value unchanged bit for bit.
+            cached_temperature_ =
+                static_cast<double>(schedule_.temperature(pass_t0_, options_.cooling, step)) * scale_;
         }
         return cached_temperature_;
     }
@@ -480,7 +519,7 @@ private:
     // point where the serial run would do something other than the next iteration.
     std::int64_t window_end() const {
         std::int64_t end = iteration_ + (parallel_mode_ ? options_.speculative : 1);
-        end = std::min({end, next_batch_, next_progress_});
+        end = std::min({end, next_batch_, next_progress_, next_exchange_});
         if (options_.max_iterations > 0) end = std::min(end, options_.max_iterations);
         if (options_.patience > 0) end = std::min(end, iteration_ + (options_.patience - since_reheat_));
         if (options_.stall_iterations > 0) end = std::min(end, iteration_ + (options_.stall_iterations - since_best_));
@@ -633,6 +672,21 @@ private:
             ++reheats_;
         }
 
+        if (iteration_ == next_exchange_) {
+            next_exchange_ += options_.exchange_every;
+            AnnealExchange x;
+            x.state = state();
+            x.temperature_scale = scale_;
+            call_each(stop, [&](auto& c) { return hook_exchange(c, x); }, callbacks...);
+            if (!(std::isfinite(x.temperature_scale) && x.temperature_scale > 0))
+                throw InputError("anneal: an exchange hook set temperature_scale to " +
+                                 option_value(x.temperature_scale) + "; it must be a finite number > 0");
+            if (x.temperature_scale != scale_) {
+                scale_ = x.temperature_scale;
+                cached_step_ = -1;
+            }
+        }
+
         if (iteration_ == next_progress_) {
             last_progress_ = iteration_;
             next_progress_ += options_.progress_every;
@@ -674,6 +728,7 @@ private:
     int reheats_ = 0;
 
     double pass_t0_ = 0;
+    double scale_ = 1.0;  // temperature scale (options.temperature_scale, then exchange hooks)
     std::int64_t pass_start_ = 0;
     std::int64_t cached_step_ = -1;
     double cached_temperature_ = 0;
@@ -684,6 +739,7 @@ private:
     double batch_delta_sum_ = 0;
 
     std::int64_t next_progress_ = never;
+    std::int64_t next_exchange_ = never;
     std::int64_t last_progress_ = -1;
     std::int64_t next_clock_check_ = 0;
     std::int64_t clock_interval_ = 1;  // grows while reads come more often than every 0.5 ms

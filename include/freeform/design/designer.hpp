@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <utility>
@@ -27,6 +28,7 @@
 #include "../surface/refine.hpp"
 #include "../trace/setup.hpp"
 #include "problem.hpp"
+#include "replicas.hpp"
 #include "start.hpp"
 
 namespace freeform {
@@ -248,9 +250,10 @@ Calibration calibrate(Problem& problem, std::uint64_t seed, double p, bool timed
 
 namespace design_detail {
 
-template <class Backend, class Callback>
+template <class Backend, class Callback, class Replicas>
 DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
-                         const DesignOptions& options, Callback&& callback, const Penalties& penalties) {
+                         const DesignOptions& options, Callback&& callback, const Penalties& penalties,
+                         Replicas& replicas) {
     using Problem = BasicReflectorProblem<Backend>;
     using clock = std::chrono::steady_clock;
     const auto t_start = clock::now();
@@ -375,7 +378,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
                                                                                   timed_calibration);
-            const double t0 = cal.temperature;
+            const double t0 = replicas.active() ? replicas.common_temperature(cal.temperature) : cal.temperature;
             problem.set_reference_temperature(t0);
 
             StageReport report;
@@ -390,7 +393,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             report.rays = rays.size();
 
             AnnealOptions ao;
-            ao.seed = stage_seed;
+            ao.seed = replicas.active() ? replicas.anneal_seed(stage_seed) : stage_seed;
             ao.initial_temperature = t0;
             ao.cooling = options.cooling;
             // Time: this stage's share of what is left of this level's share.
@@ -415,6 +418,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 const double mine = remaining_share > 0 ? (level_share / double(stages)) / remaining_share : 1.0;
                 budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
             }
+            if (replicas.active()) budget = replicas.common_budget(budget);
             ao.max_iterations = budget;
             ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
             ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
@@ -424,6 +428,15 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             ao.speculative = speculative;
             ao.threads = threads;
             ao.progress_every = std::max<std::int64_t>(1, options.progress_every);
+            if (replicas.active()) {
+                // Every stop that could differ between replicas is decided together at the
+                // exchange points (replicas.hpp); the annealer itself stops only at the
+                // common iteration budget.
+                ao.time_budget = 0;
+                ao.target_energy = std::numeric_limits<double>::quiet_NaN();
+                ao.temperature_scale = replicas.stage_temperature_scale();
+                ao.exchange_every = std::max<std::int64_t>(1, replicas.exchange_every());
+            }
 
             const auto stage_start = elapsed();
             const std::int64_t base_iteration = total_iterations;
@@ -436,6 +449,22 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 const decltype(elapsed)* clock;
                 double budget;
                 bool stopped = false;
+                Replicas* replicas = nullptr;  // set when replicas are active
+                double stage_deadline = 0;     // seconds since the design started; 0 = none
+                double target = 0;             // target error; 0 = none
+                bool exchange(AnnealExchange& x) {
+                    if (!replicas) return false;
+                    ReplicaExchange r;
+                    r.energy = x.state.energy;
+                    r.best_energy = x.state.best_energy;
+                    r.temperature = x.state.temperature;
+                    r.temperature_scale = x.temperature_scale;
+                    r.local_stop = stopped || (stage_deadline > 0 && (*clock)() >= stage_deadline) ||
+                                   (target > 0 && x.state.best_energy <= target);
+                    const bool stop_all = replicas->exchange(r);
+                    x.temperature_scale = r.temperature_scale;
+                    return stop_all;
+                }
                 bool progress(const AnnealState& s) {
                     const ObjectiveValue& v = problem->value();
                     const double now = (*clock)();
@@ -450,7 +479,8 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                     info.seconds = now;
                     info.time_left = budget > 0 ? std::max(0.0, budget - now) : 0.0;
                     if ((*user)(info)) stopped = true;
-                    return stopped;
+                    // With replicas, a stop is taken at the next exchange point, by all.
+                    return replicas ? false : stopped;
                 }
             };
             Hooks hooks{&problem, &result.convergence, &callback, {}, base_iteration, &elapsed, options.time_budget};
@@ -461,6 +491,11 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             hooks.info.mesh = std::max(level.mesh_x, level.mesh_y);
             hooks.info.resolution = std::max(receiver.width, receiver.height);
             hooks.info.kernel_support = report.kernel_support;
+            if (replicas.active()) {
+                hooks.replicas = &replicas;
+                hooks.stage_deadline = options.time_budget > 0 ? elapsed() + stage_time : 0;
+                hooks.target = options.target_error;
+            }
 
             const AnnealResult ar = anneal(problem, ao, hooks);
             total_iterations += ar.iterations;
@@ -477,6 +512,11 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             result.stages.push_back(report);
             stop = hooks.stopped || (options.target_error > 0 && problem.value().total <= options.target_error);
             result.stopped_early = hooks.stopped;
+            if (replicas.active()) {
+                // Every replica goes on to the next stage, or none does.
+                result.stopped_early = replicas.any(hooks.stopped);
+                stop = replicas.any(stop);
+            }
 
             const bool last = li + 1 == levels.size() && si + 1 == stages;
             if (last || stop) {
@@ -528,14 +568,25 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 // so far is kept). options.evaluation picks incremental (default) or full retraces.
 // `penalties` replaces the height terms the options ask for (default_penalties(options))
 // when a caller adds terms of its own.
+//
+// `replicas` makes this design one replica of several (replicas.hpp); SingleReplica, the
+// default, is the plain design.
+template <class Callback, ReplicaCoordinator Replicas>
+DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
+                    Callback&& callback, const Penalties& penalties, Replicas& replicas) {
+    if (options.evaluation == "full")
+        return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
+                                                              std::forward<Callback>(callback), penalties, replicas);
+    return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
+                                                          std::forward<Callback>(callback), penalties, replicas);
+}
+
 template <class Callback>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback, const Penalties& penalties) {
-    if (options.evaluation == "full")
-        return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
-                                                              std::forward<Callback>(callback), penalties);
-    return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
-                                                          std::forward<Callback>(callback), penalties);
+    SingleReplica single;
+    return design(scene, std::move(initial), target_image, options, std::forward<Callback>(callback), penalties,
+                  single);
 }
 
 template <class Callback>

@@ -1,0 +1,72 @@
+#pragma once
+// How the designer runs as one of several replicas (replica exchange, "parallel
+// tempering"), without knowing how the replicas talk to each other.
+//
+// design() takes a coordinator; the default, SingleReplica, is the plain design and
+// changes nothing. freeform/mpi/replica_exchange.hpp provides one over MPI (one replica per
+// rank). Everything here is free of MPI and does no I/O.
+//
+// A coordinator provides:
+//   bool active() const                 false: a single design, nothing below is asked
+//   std::uint64_t anneal_seed(std::uint64_t stage_seed)
+//                                       the seed of a stage's annealing run on this replica
+//                                       (stage_seed itself on replica 0; the rays, the start
+//                                       and the calibration use the common seed, so every
+//                                       replica minimises the same function)
+//   double stage_temperature_scale()    the temperature scale a stage starts at (its rung
+//                                       of the ladder)
+//   std::int64_t exchange_every() const iterations between exchange points (> 0)
+//   double common_temperature(double)   the initial temperature every replica uses
+//   std::int64_t common_budget(std::int64_t)
+//                                       the iteration budget every replica uses
+//   bool any(bool)                      true on every replica when any passed true
+//   bool exchange(ReplicaExchange&)     at an exchange point, on every replica at once:
+//                                       may change temperature_scale; true = every
+//                                       replica stops the stage here
+// When active, the designer makes every decision that could end a stage at different
+// iterations on different replicas a common one: the stage's time limit, a target error
+// and a stop asked by the progress callback are checked at exchange points and passed
+// to exchange() as local_stop, and the run stops where exchange() says. Budgets and
+// initial temperatures, which the designer measures, go through common_*. Every replica
+// thus reaches every exchange point of every stage, which is what a collective exchange
+// needs.
+#include <concepts>
+#include <cstdint>
+
+namespace freeform {
+
+struct ReplicaExchange {
+    double energy = 0;             // this replica's current objective
+    double best_energy = 0;        // its best in this stage
+    double temperature = 0;        // the temperature its next iteration runs at
+    double temperature_scale = 1;  // in: current scale; out: the scale from now on
+    bool local_stop = false;       // this replica would stop here (time, target, user)
+};
+
+// The plain design: one replica, nothing exchanged.
+struct SingleReplica {
+    bool active() const { return false; }
+    std::uint64_t anneal_seed(std::uint64_t stage_seed) const { return stage_seed; }
+    double stage_temperature_scale() const { return 1.0; }
+    std::int64_t exchange_every() const { return 0; }
+    double common_temperature(double t) const { return t; }
+    std::int64_t common_budget(std::int64_t b) const { return b; }
+    bool any(bool b) const { return b; }
+    bool exchange(ReplicaExchange& x) const { return x.local_stop; }
+};
+
+template <class C>
+concept ReplicaCoordinator = requires(C& c, const C& cc, std::uint64_t seed, double t, std::int64_t b, bool f,
+                                      ReplicaExchange& x) {
+    { cc.active() } -> std::convertible_to<bool>;
+    { c.anneal_seed(seed) } -> std::convertible_to<std::uint64_t>;
+    { c.stage_temperature_scale() } -> std::convertible_to<double>;
+    { cc.exchange_every() } -> std::convertible_to<std::int64_t>;
+    { c.common_temperature(t) } -> std::convertible_to<double>;
+    { c.common_budget(b) } -> std::convertible_to<std::int64_t>;
+    { c.any(f) } -> std::convertible_to<bool>;
+    { c.exchange(x) } -> std::convertible_to<bool>;
+};
+static_assert(ReplicaCoordinator<SingleReplica>);
+
+}  // namespace freeform

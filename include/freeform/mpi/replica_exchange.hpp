@@ -1,0 +1,370 @@
+#pragma once
+// Replica-exchange annealing over MPI: one replica of the design per rank (CMake target
+// freeform::mpi, built only where MPI is found). The annealer and the designer stay free
+// of MPI; this file is the coordinator they are given (design/replicas.hpp).
+//
+// The method ("parallel tempering"). Rank r anneals its own copy of the design with its
+// own random streams (rank 0 with exactly the streams of a plain design), at the
+// designer's temperature schedule multiplied by the scale of its rung on a ladder:
+//
+//   scale(rung k) = ladder_ratio^k,   k = 0 (coldest, the plain schedule) ... ranks − 1.
+//
+// A geometric ladder: for a system whose energy fluctuations grow in proportion to the
+// temperature (a roughly constant heat capacity, which is what an error summed over many
+// independent receiver cells behaves like) neighbouring rungs then overlap equally, so
+// every pair swaps at about the same rate, and the hottest rung is ratio^(n−1) times the
+// schedule. The default ratio, 1.5, keeps the hottest of 4 rungs at 3.4 × the calibrated
+// temperature, where the hot replica still shapes light instead of wandering.
+//
+// Every exchange_every iterations of a stage the ranks meet (MPI_Allgather of energy,
+// temperature and "I would stop here"). Neighbouring rungs (k, k+1) propose to swap
+// temperatures and accept with the Metropolis rule
+//
+//   p = min(1, exp((1/T_k − 1/T_{k+1}) · (E_k − E_{k+1}))),
+//
+// the uniform number drawn from a stream keyed by the seed and a counter that every rank
+// advances alike, so all ranks take the same decisions without further messages. With 3
+// or more rungs the pairs alternate between even and odd k (pairs are disjoint, each
+// rank moves at most one rung per exchange); with 2 rungs the one pair is proposed every
+// time.
+//
+// What is swapped: the temperatures, not the surfaces. A temperature is one number;
+// a surface is the height field plus the incremental tracer's state built on it (per-cell
+// ray lists, the histogram, the objective's sums): sending it means megabytes per swap
+// and a full retrace on arrival. Swapping temperatures gives the same Markov chain over
+// (surface, temperature) pairs for the price of the 4 doubles each rank sends anyway.
+// A swap gives each rank exactly the other's current temperature, by multiplying its
+// scale by T_other / T_own: re-heats happen per replica, so two replicas' schedules can
+// be at different points, and the rule above must use (and hand over) the temperatures
+// the replicas really run at. When the schedules are in step, which is the usual case,
+// this is the swap of the two rungs' scales. Rungs are tracked as labels for the report
+// and a new stage starts every rank at the scale of the rung it holds.
+//
+// The result: each replica ends every stage holding its best state; at the end the
+// replica with the lowest objective (ties: the lowest rank) wins and its result is sent
+// to rank 0 (gather_best). With one rank all of this reduces to the plain design, bit
+// for bit (the exchange points only split the annealer's windows, which does not change
+// its trajectory).
+//
+// Failure: a rank that dies makes the others wait in the next collective until the MPI
+// runtime ends the job (Open MPI's mpirun kills every rank and exits non-zero, naming
+// the rank); nothing here writes files, so a caller that writes only after gather_best
+// leaves no partial output.
+#include <mpi.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "../core/rng.hpp"
+#include "../design/designer.hpp"
+#include "../design/replicas.hpp"
+
+namespace freeform::mpi {
+
+struct ReplicaOptions {
+    double ladder_ratio = 1.5;          // scale of rung k = ladder_ratio^k; ≥ 1
+    std::int64_t exchange_every = 500;  // iterations between exchange points; ≥ 1
+};
+
+inline void validate(const ReplicaOptions& o) {
+    if (!std::isfinite(o.ladder_ratio) || o.ladder_ratio < 1)
+        throw InputError("replicas: ladder_ratio must be a finite number ≥ 1, got " + std::to_string(o.ladder_ratio));
+    if (o.exchange_every < 1)
+        throw InputError("replicas: exchange_every must be ≥ 1, got " + std::to_string(o.exchange_every));
+}
+
+// Swap statistics of the rung pair (k, k+1).
+struct PairStats {
+    int cold_rung = 0;
+    std::int64_t proposed = 0;
+    std::int64_t accepted = 0;
+};
+
+namespace detail {
+
+inline void check(int code, const char* what) {
+    if (code != MPI_SUCCESS) throw std::runtime_error(std::string("MPI: ") + what + " failed");
+}
+
+inline constexpr std::uint64_t exchange_stream = 0x65786368616e6765ULL;  // "exchange"
+inline constexpr std::uint64_t replica_stream = 0x7265706c696361ULL;     // "replica"
+
+// A byte buffer for sending a result from one rank to another (same program, same
+// machine type: values are copied as they are in memory).
+class Packer {
+public:
+    template <class T>
+    void put(const T& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        const auto* p = reinterpret_cast<const char*>(&v);
+        bytes.insert(bytes.end(), p, p + sizeof(T));
+    }
+    template <class T>
+    void put_vector(const std::vector<T>& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        put<std::uint64_t>(v.size());
+        const auto* p = reinterpret_cast<const char*>(v.data());
+        bytes.insert(bytes.end(), p, p + v.size() * sizeof(T));
+    }
+    void put_string(const std::string& s) {
+        put<std::uint64_t>(s.size());
+        bytes.insert(bytes.end(), s.begin(), s.end());
+    }
+    std::vector<char> bytes;
+};
+
+class Unpacker {
+public:
+    explicit Unpacker(const std::vector<char>& b) : bytes_(b) {}
+    template <class T>
+    T get() {
+        static_assert(std::is_trivially_copyable_v<T>);
+        need(sizeof(T));
+        T v;
+        std::memcpy(&v, bytes_.data() + at_, sizeof(T));
+        at_ += sizeof(T);
+        return v;
+    }
+    template <class T>
+    std::vector<T> get_vector() {
+        const auto n = std::size_t(get<std::uint64_t>());
+        need(n * sizeof(T));
+        std::vector<T> v(n);
+        if (n > 0) std::memcpy(v.data(), bytes_.data() + at_, n * sizeof(T));
+        at_ += n * sizeof(T);
+        return v;
+    }
+    std::string get_string() {
+        const auto n = std::size_t(get<std::uint64_t>());
+        need(n);
+        std::string s(bytes_.data() + at_, n);
+        at_ += n;
+        return s;
+    }
+
+private:
+    void need(std::size_t n) const {
+        if (at_ + n > bytes_.size()) throw std::runtime_error("replicas: truncated result message");
+    }
+    const std::vector<char>& bytes_;
+    std::size_t at_ = 0;
+};
+
+// What rank 0 needs of another rank's result. The start report and the target are the
+// same on every rank (the start and the rays use the common seed) and are not sent.
+inline std::vector<char> pack_result(const DesignResult& r) {
+    Packer p;
+    p.put(r.surface.nx());
+    p.put(r.surface.ny());
+    p.put_vector(r.surface.heights());
+    p.put(r.irradiance.width);
+    p.put(r.irradiance.height);
+    p.put_vector(r.irradiance.cells);
+    p.put(r.value);
+    p.put(r.iterations);
+    p.put(r.accepted);
+    p.put(r.seconds);
+    p.put(r.stopped_early);
+    p.put<std::uint64_t>(r.stages.size());
+    for (const StageReport& s : r.stages) {
+        p.put(s.level), p.put(s.mesh_x), p.put(s.mesh_y), p.put(s.resolution_x), p.put(s.resolution_y);
+        p.put(s.kernel_support), p.put(s.iterations), p.put(s.accepted), p.put(s.proposals_evaluated);
+        p.put(s.seconds), p.put(s.initial_temperature), p.put(s.error_start), p.put(s.error_end);
+        p.put(s.energy_end), p.put(s.objective_end), p.put(s.rays);
+        p.put_vector(s.bandit_weights);
+        p.put_string(s.stop_reason);
+    }
+    p.put_vector(r.convergence);
+    p.put_vector(r.kernel_bank);
+    p.put_vector(r.bandit_weights);
+    p.put_vector(r.preprocess_rates);
+    p.put(r.rays);
+    return std::move(p.bytes);
+}
+
+inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
+    Unpacker u(bytes);
+    const int nx = u.get<int>(), ny = u.get<int>();
+    std::vector<float> heights = u.get_vector<float>();
+    if (nx != r.surface.nx() || ny != r.surface.ny())
+        throw std::runtime_error("replicas: the winning replica's mesh differs from rank 0's");
+    r.surface.set_heights(heights);
+    r.irradiance.width = u.get<int>();
+    r.irradiance.height = u.get<int>();
+    r.irradiance.cells = u.get_vector<Fixed>();
+    r.value = u.get<ObjectiveValue>();
+    r.iterations = u.get<std::int64_t>();
+    r.accepted = u.get<std::int64_t>();
+    r.seconds = u.get<double>();
+    r.stopped_early = u.get<bool>();
+    r.stages.resize(std::size_t(u.get<std::uint64_t>()));
+    for (StageReport& s : r.stages) {
+        s.level = u.get<int>(), s.mesh_x = u.get<int>(), s.mesh_y = u.get<int>();
+        s.resolution_x = u.get<int>(), s.resolution_y = u.get<int>(), s.kernel_support = u.get<int>();
+        s.iterations = u.get<std::int64_t>(), s.accepted = u.get<std::int64_t>();
+        s.proposals_evaluated = u.get<std::int64_t>();
+        s.seconds = u.get<double>(), s.initial_temperature = u.get<double>(), s.error_start = u.get<double>();
+        s.error_end = u.get<double>(), s.energy_end = u.get<double>(), s.objective_end = u.get<double>();
+        s.rays = u.get<std::int64_t>();
+        s.bandit_weights = u.get_vector<double>();
+        s.stop_reason = u.get_string();
+    }
+    r.convergence = u.get_vector<ConvergencePoint>();
+    r.kernel_bank = u.get_vector<KernelShape>();
+    r.bandit_weights = u.get_vector<double>();
+    r.preprocess_rates = u.get_vector<double>();
+    r.rays = u.get<std::int64_t>();
+}
+
+}  // namespace detail
+
+// The coordinator of design() (design/replicas.hpp) for one replica per rank of `comm`.
+// Every rank must make the same calls in the same order (design() does).
+class Replicas {
+public:
+    Replicas(MPI_Comm comm, std::uint64_t seed, ReplicaOptions options = {})
+        : comm_(comm), options_(options), exchange_key_(hash_combine(seed, detail::exchange_stream)) {
+        validate(options_);
+        detail::check(MPI_Comm_rank(comm_, &rank_), "MPI_Comm_rank");
+        detail::check(MPI_Comm_size(comm_, &size_), "MPI_Comm_size");
+        rung_.resize(std::size_t(size_));
+        for (int r = 0; r < size_; ++r) rung_[std::size_t(r)] = r;
+        pairs_.resize(std::size_t(std::max(0, size_ - 1)));
+        for (std::size_t k = 0; k < pairs_.size(); ++k) pairs_[k].cold_rung = int(k);
+    }
+
+    int rank() const { return rank_; }
+    int size() const { return size_; }
+    const ReplicaOptions& options() const { return options_; }
+    // Rung held by each rank now, and the swap statistics of each neighbouring pair.
+    const std::vector<int>& rungs() const { return rung_; }
+    const std::vector<PairStats>& pairs() const { return pairs_; }
+    std::int64_t exchange_points() const { return points_; }
+    double rung_scale(int rung) const { return std::pow(options_.ladder_ratio, double(rung)); }
+
+    // --- the coordinator interface (design/replicas.hpp)
+    bool active() const { return true; }
+    std::uint64_t anneal_seed(std::uint64_t stage_seed) const {
+        return rank_ == 0 ? stage_seed : hash_combine(stage_seed, detail::replica_stream + std::uint64_t(rank_));
+    }
+    double stage_temperature_scale() const { return rung_scale(rung_[std::size_t(rank_)]); }
+    std::int64_t exchange_every() const { return options_.exchange_every; }
+    double common_temperature(double t) const {
+        detail::check(MPI_Bcast(&t, 1, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
+        return t;
+    }
+    // The mean of the ranks' budgets. In a time-budgeted design each rank fits its budget
+    // to the speed it measured in a short calibration, which is noisy where ranks share
+    // cores (one rank descheduled during its calibration measures a fraction of the real
+    // speed): the minimum would let that rank starve every replica. The stage's time
+    // limit is enforced at the exchange points anyway.
+    std::int64_t common_budget(std::int64_t b) const {
+        std::int64_t sum = 0;
+        detail::check(MPI_Allreduce(&b, &sum, 1, MPI_INT64_T, MPI_SUM, comm_), "MPI_Allreduce");
+        return std::max<std::int64_t>(1, sum / size_);
+    }
+    bool any(bool b) const {
+        int in = b ? 1 : 0, out = 0;
+        detail::check(MPI_Allreduce(&in, &out, 1, MPI_INT, MPI_LOR, comm_), "MPI_Allreduce");
+        return out != 0;
+    }
+
+    bool exchange(ReplicaExchange& x) {
+        const double mine[4] = {x.energy, x.temperature, x.temperature_scale, x.local_stop ? 1.0 : 0.0};
+        all_.resize(std::size_t(4 * size_));
+        detail::check(MPI_Allgather(mine, 4, MPI_DOUBLE, all_.data(), 4, MPI_DOUBLE, comm_), "MPI_Allgather");
+        bool stop = false;
+        for (int r = 0; r < size_; ++r) stop = stop || all_[std::size_t(4 * r + 3)] != 0;
+        const std::int64_t point = points_++;
+        if (stop || size_ < 2) return stop;
+
+        std::vector<int> at_rung(static_cast<std::size_t>(size_));
+        for (int r = 0; r < size_; ++r) at_rung[std::size_t(rung_[std::size_t(r)])] = r;
+        const int first = size_ == 2 ? 0 : int(point % 2);
+        for (int k = first; k + 1 < size_; k += 2) {
+            const int i = at_rung[std::size_t(k)], j = at_rung[std::size_t(k + 1)];
+            const double ei = all_[std::size_t(4 * i)], ti = all_[std::size_t(4 * i + 1)];
+            const double ej = all_[std::size_t(4 * j)], tj = all_[std::size_t(4 * j + 1)];
+            PairStats& ps = pairs_[std::size_t(k)];
+            ++ps.proposed;
+            // Every rank draws the same number for the same decision.
+            CounterRng rng(exchange_key_, std::uint64_t(decisions_++));
+            const double u = rng.uniform();
+            if (!(ti > 0 && tj > 0)) continue;
+            const double a = (1.0 / ti - 1.0 / tj) * (ei - ej);
+            if (!(a >= 0 || u < std::exp(a))) continue;
+            ++ps.accepted;
+            std::swap(rung_[std::size_t(i)], rung_[std::size_t(j)]);
+            // Each takes the other's temperature exactly (see the notes at the top).
+            if (rank_ == i) x.temperature_scale = all_[std::size_t(4 * i + 2)] * (tj / ti);
+            if (rank_ == j) x.temperature_scale = all_[std::size_t(4 * j + 2)] * (ti / tj);
+        }
+        return false;
+    }
+
+    // --- the end of the run
+    // Picks the replica with the lowest objective (ties: lowest rank) and moves its result
+    // to rank 0; on rank 0 `result` is then the winner's. Returns the winning rank (on
+    // every rank). `objectives` receives every rank's final objective, in rank order.
+    int gather_best(DesignResult& result, std::vector<double>* objectives = nullptr) const {
+        struct {
+            double value;
+            int rank;
+        } in{result.value.total, rank_}, out{};
+        if (!std::isfinite(in.value)) in.value = std::numeric_limits<double>::max();
+        detail::check(MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, comm_), "MPI_Allreduce");
+        if (objectives) {
+            objectives->assign(std::size_t(size_), 0.0);
+            double mine = result.value.total;
+            detail::check(MPI_Gather(&mine, 1, MPI_DOUBLE, objectives->data(), 1, MPI_DOUBLE, 0, comm_),
+                          "MPI_Gather");
+        }
+        const int winner = out.rank;
+        if (winner != 0) {
+            constexpr int tag = 0x5245;
+            if (rank_ == winner) {
+                const std::vector<char> bytes = detail::pack_result(result);
+                const std::uint64_t n = bytes.size();
+                detail::check(MPI_Send(&n, 1, MPI_UINT64_T, 0, tag, comm_), "MPI_Send");
+                detail::check(MPI_Send(bytes.data(), int(n), MPI_BYTE, 0, tag + 1, comm_), "MPI_Send");
+            } else if (rank_ == 0) {
+                std::uint64_t n = 0;
+                detail::check(MPI_Recv(&n, 1, MPI_UINT64_T, winner, tag, comm_, MPI_STATUS_IGNORE), "MPI_Recv");
+                std::vector<char> bytes(std::size_t(n), 0);
+                detail::check(MPI_Recv(bytes.data(), int(n), MPI_BYTE, winner, tag + 1, comm_, MPI_STATUS_IGNORE),
+                              "MPI_Recv");
+                detail::unpack_result(bytes, result);
+            }
+        }
+        return winner;
+    }
+
+    // Sums of an integer over all ranks, on rank 0 (e.g. iterations of all replicas).
+    std::int64_t sum_on_root(std::int64_t v) const {
+        std::int64_t out = 0;
+        detail::check(MPI_Reduce(&v, &out, 1, MPI_INT64_T, MPI_SUM, 0, comm_), "MPI_Reduce");
+        return out;
+    }
+
+private:
+    MPI_Comm comm_;
+    ReplicaOptions options_;
+    std::uint64_t exchange_key_;
+    int rank_ = 0, size_ = 1;
+    std::vector<int> rung_;  // rung held by each rank
+    std::vector<PairStats> pairs_;
+    std::vector<double> all_;
+    std::int64_t points_ = 0;     // exchange points met
+    std::int64_t decisions_ = 0;  // swap decisions drawn
+};
+
+static_assert(ReplicaCoordinator<Replicas>);
+
+}  // namespace freeform::mpi
