@@ -169,7 +169,8 @@ TEST_CASE("total internal reflection at the back face is counted as lost") {
     // Light grazing at 80 degrees from the normal, travelling +u, enters a face tilted 30
     // degrees towards -u. Inside, it runs at more than the critical angle (42.2 degrees
     // for n = 1.49) to the flat back face, so every ray reaching the back face is lost to
-    // TIR; rays that reach the side wall first are absorbed there. A scalar 2-D
+    // TIR; rays that reach the side wall first refract out through it (at 29 degrees from
+    // the wall's normal, below the critical angle) and miss the receiver. A scalar 2-D
     // calculation predicts which rays do which.
     const double n = 1.49, beta = degrees_to_radians(30.0), phi = degrees_to_radians(80.0), thick = 0.03;
     Scene s = lens_scene(-0.5);

@@ -370,6 +370,28 @@ TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the desig
     CHECK(one.histogram == traced.histogram);
 }
 
+TEST_CASE("light that meets the lens model's side wall is reflected inside, as in the solid it models") {
+    // A flat lens lit at 0.3 rad: inside, rays run 11.4 degrees from the normal, so those
+    // entering within 2 mm of the +u edge meet the side wall first, at 78.6 degrees from
+    // its normal (beyond the critical angle), and leave through the back face after one
+    // reflection. The height-field lens model must do what its solid, a glass box, does.
+    const double n = 1.49, t = 0.01;
+    Scene s = lens_bench(0.3, 0.4, 100);
+    s.surface.material = Lens{n, t};
+    s.surface.h_min = -0.002, s.surface.h_max = 0.002;
+    s.light.shape = CollimatedLight{{std::sin(0.3), 0, -std::cos(0.3)}};
+    const Heightmap flat = surface_for(s, 11);
+    const RaySet rays = generate_rays(s.light, flat, s.receiver, 1);
+    const Traced model = trace_scene(s, flat, rays);
+    const double hu = 0.5 * s.surface.size.x, hv = 0.5 * s.surface.size.y;
+    const Traced solid = trace_meshes(s, rays, {ExtraMesh{box({-hu, -hv, -t}, {hu, hv, 0}), MeshMaterial::refractive(n)}});
+    const double l1 = l1_distance(model.histogram, solid.histogram) / (2.0 * double(rays.total));
+    MESSAGE("energy: lens model ", model.totals.energy(), ", glass box ", solid.totals.energy(), "; L1 ", l1);
+    CHECK(model.totals.energy() > 0.999);  // absorbing walls would lose about 2 %
+    CHECK(solid.totals.energy() > 0.999);
+    CHECK(l1 < 0.002);
+}
+
 TEST_CASE("the tracer refuses refractive meshes that do not bound a solid") {
     Scene s = lens_bench(0.5, 0.2, 20);
     const RaySet rays = generate_rays(s.light, surface_for(s, 5), s.receiver, 1);

@@ -63,7 +63,7 @@ def run(cmd, log, **kw):
     return time.time() - t0
 
 
-def freeform_render(args, scene, work, mesh=None, heightmap=None, tag="freeform"):
+def freeform_render(args, scene, work, mesh=None, heightmap=None, tag="freeform", material=None):
     """freeform's irradiance of the same geometry with many rays and nearest deposit (cell
     integrals, no bilinear blur), at the scene's receiver resolution."""
     sc = json.loads(json.dumps(scene))
@@ -79,6 +79,8 @@ def freeform_render(args, scene, work, mesh=None, heightmap=None, tag="freeform"
     cmd = [args.freeform, "render", path, "--out", out, "--threads", str(args.threads)]
     if mesh:
         cmd += ["--mesh", mesh]
+    if material:
+        cmd += ["--material", material]
     if heightmap:
         cmd += ["--heightmap", heightmap]
     seconds = run(cmd, os.path.join(work, tag + ".log"))
@@ -322,12 +324,11 @@ def main():
         scene = dm["effective_scene"]
         mesh = os.path.join(design, "surface.obj")
         lens = isinstance(scene["surface"]["material"], dict)
-        # freeform's trace of the same part: the exported sheet as flat triangles for a mirror
-        # (render --mesh); for the lens, whose solid render --mesh does not refract, the
-        # designed heightmap (Phong patches; the exported solid differs from it by
-        # metrics.json export.l1_to_design_irradiance).
+        # freeform's trace of the same part: the exported mesh as flat triangles (render
+        # --mesh), the lens as its closed solid of the scene's index (--material refractive).
         if lens:
-            ff, ff_s, ffm = freeform_render(args, scene, work, heightmap=os.path.join(design, "heightmap.pfm"))
+            ior = scene["surface"]["material"]["refractive"]
+            ff, ff_s, ffm = freeform_render(args, scene, work, mesh=mesh, material="refractive:%.17g" % ior)
         else:
             ff, ff_s, ffm = freeform_render(args, scene, work, mesh=mesh)
         # POV-Ray point-samples the photon map (one ray per pixel, each estimate a disc of
@@ -395,7 +396,7 @@ NOTES = """## How POV-Ray is set up, and what remains
 - Compared resolution: the scene's receiver binned 2 × 2 (2 mm cells; the headlight at its own 50 × 50, 4 mm cells). There both sides are converged to within the goal: at the scene's full resolution the L1 rises (photon noise and the photon-gather blur of about 1 mm act per cell), and what is left at the compared resolution is photon noise plus that blur along the sharp edges and the fine facet caustics (streaks in the difference pictures), not a shift or a scale: the known-answer checks put the footprint and the focus where they belong to 0.003 mm.
 - Photons: `count` 4,000,000 per case (POV-Ray shoots about 2 × that over the target's bounding disc and stores those that land), `autostop 0`, `jitter 0.4`, gather 100–400 photons per estimate; on E (design reused) `--photons 1000000` gives L1 0.030 at 100 × 100 (0.048 at 200 × 200) and POV-Ray's error against the target 0.0355, 4 M give 0.021 (0.036) and 0.034: the error against the target has settled, the L1 between the two still falls with more photons (pure noise would fall to 0.015), so photon noise is most of what remains. Render times are on the shared 2-core machine.
 - The receiver does not shadow the light: the light is placed between the surface and the receiver (DESIGN.md: the receiver is transparent to incoming light), and the receiver sits in a `light_group` with `global_lights off`, so it is lit by photons only (no direct term, as freeform records only light that has left the surface). The surface has neither `no_shadow` nor `no_image` (either flag makes POV-Ray 3.7 store no photons from it); the orthographic camera starts between the surface and the receiver, so the surface is never in the picture. A parallel light's position and `point_at` must lie on the axis through the target's middle (off that axis POV-Ray stored no photons).
-- Lens: the exported closed solid (`inside_vector`), `pigment rgbf 1` (all light transmitted), `ior` 1.49, no `reflection`, no `fade_distance`, so, like freeform, no Fresnel reflection loss and no absorption. Differences that remain by design: POV-Ray reflects totally internally reflected light inside the solid (freeform counts it as lost; the design loses 1.8 % of its light), and the comparison traces freeform's Phong heightmap against POV-Ray's flat-faceted solid (their gap in freeform's own trace is metrics.json `export.l1_to_design_irradiance` ≈ 0.006).
+- Lens: the exported closed solid (`inside_vector`), `pigment rgbf 1` (all light transmitted), `ior` 1.49, no `reflection`, no `fade_distance`, so, like freeform, no Fresnel reflection loss and no absorption. Both sides trace the same closed solid with total internal reflection followed (`render --mesh surface.obj --material refractive:1.49` on freeform's side); the design's own lens model counts the light that leaves through the solid's side walls as lost (1.8 % on this design), which both renderers here let through.
 - freeform neglects Fresnel losses and so does POV-Ray here (mirror `reflection 1` without `fresnel`; lens without reflection).
 """
 
@@ -433,9 +434,8 @@ def write_report(args, check_lines, case_lines, total):
     out.append("")
     out.append("freeform side: `freeform render` with %g rays per receiver cell and nearest-cell deposit (cell "
                "integrals, no bilinear blur); for mirrors the exported `surface.obj` traced as flat triangles "
-               "(`--mesh`), for the lens the designed heightmap (`--heightmap`, Phong patches: `render --mesh` "
-               "does not refract a lens solid in this version; the exported solid differs from the heightmap by "
-               "metrics.json `export.l1_to_design_irradiance`). POV-Ray side: the exported mesh as `mesh2` (flat "
+               "(`--mesh`), the lens as its exported closed solid (`--mesh surface.obj --material refractive:IOR`: "
+               "Snell at every crossing, total internal reflection followed). POV-Ray side: the exported mesh as `mesh2` (flat "
                "triangles), at least %d POV-Ray pixels along the receiver's longer side (one ray each, no "
                "anti-aliasing), summed into receiver cells, photon gather %d–%d photons per estimate. Pictures: `benchmarks/results/validation/`.\n"
                % (args.freeform_rays_per_cell, args.picture, args.gather_min, args.gather_max))

@@ -6,8 +6,8 @@
 // A mirror's sheet is traced in place of the height field. A lens is traced as its
 // exported closed solid (lens_solid: front facets, flat back face, side walls), a
 // refractive mesh with Snell at every crossing and total internal reflection followed:
-// what a milled or printed lens does, including the light that leaves through the side
-// walls, which the design's lens model counts as lost.
+// what a milled or printed lens does (the design's lens model follows the same walls,
+// so the difference is the facets).
 #include <algorithm>
 #include <limits>
 #include <optional>

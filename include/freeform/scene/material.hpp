@@ -2,7 +2,9 @@
 // Surface materials. A mirror reflects on its front side (the side its normal faces, where
 // the light comes from). A lens is a solid: the height field is its front face, a flat
 // back face lies `thickness` below the surface plane (at height -thickness), and light
-// refracts at both faces by Snell's law; total internal reflection is counted as lost.
+// refracts at both faces by Snell's law; total internal reflection at a face is counted
+// as lost. Its side walls (vertical, at the edges of the surface's rectangle) are glass
+// too: light that meets them is reflected inside or refracted out, as in the solid.
 // Fresnel partial reflection is neglected (all light that can be transmitted is).
 #include <cstdint>
 #include <variant>

@@ -20,7 +20,7 @@ enum class RayStatus : std::uint8_t {
     missed_surface = 2,   // never interacted with the surface
     lost_tir = 3,         // total internal reflection inside a lens
     lost_depth = 4,       // more surface interactions than max_depth
-    absorbed = 5,         // blocked by an absorbing mesh or the lens side wall
+    absorbed = 5,         // blocked by an absorbing mesh, or lost in a leaking solid
     active = 255,         // still being traced
 };
 
@@ -196,25 +196,54 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
         // facet missed through rounding at an edge). The light is lost, not let out.
         s.status = RayStatus::absorbed;
     } else if (s.inside) {
+        // No front facet ahead: the ray leaves the lens body through its flat back face
+        // or a side wall (the vertical planes |u| = half_u, |v| = half_v, glass like the
+        // rest of a milled solid). Steep rays meet a wall beyond the critical angle and
+        // are reflected back inside (each reflection counts towards max_depth); the others
+        // refract out and go on to the receiver. Total internal reflection at the back face
+        // is counted as lost.
         const MaterialView& m = pp.material;
-        if (!(s.d.z < 0.0f)) {
-            s.status = RayStatus::absorbed;  // leaves through a side wall
-        } else {
-            const float t = (m.back_w - s.o.z) / s.d.z;
-            const Vec3 p = s.o + t * s.d;
+        for (;;) {
+            constexpr float far = 3.0e38f;
+            const float t_back = s.d.z < 0.0f ? (m.back_w - s.o.z) / s.d.z : far;
+            const float t_u = s.d.x > 0.0f   ? (m.half_u - s.o.x) / s.d.x
+                              : s.d.x < 0.0f ? (-m.half_u - s.o.x) / s.d.x
+                                             : far;
+            const float t_v = s.d.y > 0.0f   ? (m.half_v - s.o.y) / s.d.y
+                              : s.d.y < 0.0f ? (-m.half_v - s.o.y) / s.d.y
+                                             : far;
+            const float t_wall = std::fmin(t_u, t_v);
             Vec3 out;
-            if (std::fabs(p.x) > m.half_u || std::fabs(p.y) > m.half_v) {
-                s.status = RayStatus::absorbed;
-            } else if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
-                s.status = RayStatus::lost_tir;
-            } else {
+            if (t_back <= t_wall) {
+                const Vec3 p = s.o + std::fmax(t_back, 0.0f) * s.d;
+                if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
+                    s.status = RayStatus::lost_tir;
+                    break;
+                }
                 s.o = p;
-                s.d = normalize(out);
-                s.inside = false;
-                s.exclude = -1;
-                s.status = RayStatus::active;
-                return true;  // one more segment: it may still meet nothing but the receiver
+            } else {
+                if (!(t_wall < far)) {  // horizontal inside an unbounded body: cannot happen
+                    s.status = RayStatus::absorbed;
+                    break;
+                }
+                const Vec3 p = s.o + std::fmax(t_wall, 0.0f) * s.d;
+                const Vec3 n = t_u <= t_v ? Vec3{s.d.x > 0.0f ? 1.0f : -1.0f, 0, 0}
+                                          : Vec3{0, s.d.y > 0.0f ? 1.0f : -1.0f, 0};
+                s.o = p;
+                if (!refract(s.d, n, m.ior, 1.0f, out)) {
+                    if (++s.depth > pp.max_depth) {
+                        s.status = RayStatus::lost_depth;
+                        break;
+                    }
+                    s.d = reflect(s.d, n);
+                    continue;
+                }
             }
+            s.d = normalize(out);
+            s.inside = false;
+            s.exclude = -1;
+            s.status = RayStatus::active;
+            return true;  // one more segment: it may still meet nothing but the receiver
         }
     } else if (s.depth == 0) {
         s.status = RayStatus::missed_surface;
