@@ -188,8 +188,9 @@ struct PathParams {
 
 namespace path_detail {
 
-// The segment met no surface: inside a lens it ends on the flat back face; otherwise the
-// ray has left the surface and ends on the receiver (or misses it).
+// The segment met no surface: inside a lens body it leaves through the back face or a
+// side wall; otherwise the ray has left the surface and ends on the receiver (or misses
+// it).
 FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRecord& rec) {
     if (s.medium > 1.0f) {
         // Inside a refractive solid and no facet ahead: the mesh leaks (a crack, or a
