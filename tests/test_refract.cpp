@@ -355,10 +355,8 @@ TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the desig
     const Fabrication fab = make_fabrication(s, st.surface);  // the watertight lens solid
     REQUIRE(check_mesh(fab.mesh).watertight());
     const ExtraMesh solid = to_surface_frame(fab.mesh, s.surface.frame, MeshMaterial::refractive(1.49));
-    double top = -1;
-    for (const Vec3d& p : solid.mesh.vertices) top = std::max(top, p.z);
     RaySet lifted = rays;
-    start_collimated_above(s.light, top + 1e-7, lifted);
+    start_above(s.light, s.surface.size, solid.mesh, lifted);
     const Traced traced = trace_meshes(s, lifted, {solid});
     const double l1 = l1_distance(design.histogram, traced.histogram) / (2.0 * double(rays.total));
     MESSAGE("lens solid (k = ", fab.subdivisions, ", ", fab.mesh.triangles.size(), " triangles): L1 to the design ",

@@ -318,14 +318,8 @@ int run_render(const RenderArgs& a) {
     // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
     if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
     // A refractive solid is the whole lens: the scene's lens model (its flat back face)
-    // does not apply, and a collimated beam must start above the solid's top.
-    if (mesh_material) {
-        pp.material = MaterialView{};
-        double top = -std::numeric_limits<double>::infinity();
-        for (const Vec3d& p : mesh->vertices) top = std::max(top, scene.surface.frame.to_local(p).z);
-        const double margin = 1e-6 * std::max(scene.surface.size.x, scene.surface.size.y);
-        start_collimated_above(scene.light, top + margin, rays);
-    }
+    // does not apply (and the beam starts above the solid, below).
+    if (mesh_material) pp.material = MaterialView{};
     pp.interpolated_normals = a.mesh_normals;
     const int threads = thread_count(exec::omp_t{a.threads});
     StatusLine status(true);
@@ -338,7 +332,9 @@ int run_render(const RenderArgs& a) {
         for (std::size_t k = 0; k < extra.size(); ++k)
             extras.push_back(to_surface_frame(extra[k], scene.surface.frame, scene.meshes[k].material));
         if (mesh && mesh_material) {
-            extras.insert(extras.begin(), to_surface_frame(*mesh, scene.surface.frame, *mesh_material));
+            ExtraMesh solid = to_surface_frame(*mesh, scene.surface.frame, *mesh_material);
+            start_above(scene.light, scene.surface.size, solid.mesh, rays);
+            extras.insert(extras.begin(), std::move(solid));
             r = render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, status);
         } else if (mesh) {
             const ExtraMesh local = to_surface_frame(*mesh, scene.surface.frame, true);

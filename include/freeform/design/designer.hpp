@@ -378,7 +378,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
                                                                                   timed_calibration);
-            const double t0 = replicas.active() ? replicas.common_temperature(cal.temperature) : cal.temperature;
+            const double t0 = replicas.common_temperature(cal.temperature);  // identity for one replica
             problem.set_reference_temperature(t0);
 
             StageReport report;
@@ -393,7 +393,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             report.rays = rays.size();
 
             AnnealOptions ao;
-            ao.seed = replicas.active() ? replicas.anneal_seed(stage_seed) : stage_seed;
+            ao.seed = replicas.anneal_seed(stage_seed);
             ao.initial_temperature = t0;
             ao.cooling = options.cooling;
             // Time: this stage's share of what is left of this level's share.
@@ -418,7 +418,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 const double mine = remaining_share > 0 ? (level_share / double(stages)) / remaining_share : 1.0;
                 budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
             }
-            if (replicas.active()) budget = replicas.common_budget(budget);
+            budget = replicas.common_budget(budget);
             ao.max_iterations = budget;
             ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
             ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
@@ -510,13 +510,10 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             report.bandit_weights = options.single_vertex ? std::vector<double>{} : problem.bandit().weights();
             report.stop_reason = to_string(ar.reason);
             result.stages.push_back(report);
-            stop = hooks.stopped || (options.target_error > 0 && problem.value().total <= options.target_error);
-            result.stopped_early = hooks.stopped;
-            if (replicas.active()) {
-                // Every replica goes on to the next stage, or none does.
-                result.stopped_early = replicas.any(hooks.stopped);
-                stop = replicas.any(stop);
-            }
+            // With replicas, every replica goes on to the next stage, or none does.
+            result.stopped_early = replicas.any(hooks.stopped);
+            stop = replicas.any(hooks.stopped ||
+                                (options.target_error > 0 && problem.value().total <= options.target_error));
 
             const bool last = li + 1 == levels.size() && si + 1 == stages;
             if (last || stop) {

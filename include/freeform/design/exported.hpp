@@ -8,8 +8,6 @@
 // refractive mesh with Snell at every crossing and total internal reflection followed:
 // what a milled or printed lens does (the design's lens model follows the same walls,
 // so the difference is the facets).
-#include <algorithm>
-#include <limits>
 #include <optional>
 #include <vector>
 
@@ -38,11 +36,8 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surf
     if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) {
         // The solid replaces the lens model; a collimated beam starts above its top.
         TriangleMesh solid = lens_solid(surface, *lens, alpha, subdivisions, false);
-        double top = -std::numeric_limits<double>::infinity();
-        for (const Vec3d& p : solid.vertices) top = std::max(top, p.z);
         lens_rays = rays;
-        start_collimated_above(scene.light, top + 1e-6 * std::max(scene.surface.size.x, scene.surface.size.y),
-                               lens_rays);
+        start_above(scene.light, scene.surface.size, solid, lens_rays);
         pp.material = MaterialView{};
         std::vector<ExtraMesh> meshes;
         meshes.push_back(ExtraMesh{std::move(solid), MeshMaterial::refractive(lens->ior)});

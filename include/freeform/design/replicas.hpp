@@ -7,7 +7,8 @@
 // rank). Everything here is free of MPI and does no I/O.
 //
 // A coordinator provides:
-//   bool active() const                 false: a single design, nothing below is asked
+//   bool active() const                 false: a single design (no exchange points; the
+//                                       calls below then leave every value as it is)
 //   std::uint64_t anneal_seed(std::uint64_t stage_seed)
 //                                       the seed of a stage's annealing run on this replica
 //                                       (stage_seed itself on replica 0; the rays, the start

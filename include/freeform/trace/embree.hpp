@@ -87,6 +87,15 @@ inline ExtraMesh to_surface_frame(const TriangleMesh& world_mesh, const Frame& s
     return to_surface_frame(world_mesh, surface_frame, mirror ? MeshMaterial::mirror() : MeshMaterial::absorber());
 }
 
+// A collimated beam starts just above the surface's height bounds (generate_rays); a
+// solid traced in the surface's place (`solid`, surface frame) may rise higher. Starts
+// the beam above it, clear of its top by a millionth of the surface's larger side.
+inline void start_above(const Light& light, Vec2d surface_size, const TriangleMesh& solid, RaySet& rays) {
+    double top = -std::numeric_limits<double>::infinity();
+    for (const Vec3d& p : solid.vertices) top = std::max(top, p.z);
+    start_collimated_above(light, top + 1e-6 * std::max(surface_size.x, surface_size.y), rays);
+}
+
 // An Embree device whose errors become exceptions. Embree reports errors through a
 // callback that must not throw (it is called from inside the library), so the callback
 // only records the error and `check` turns it into a std::runtime_error at our API

@@ -188,6 +188,14 @@ struct PathParams {
 
 namespace path_detail {
 
+inline constexpr float no_exit = 3.0e38f;  // "never", as a distance
+
+// Distance along one axis from o to the wall at -half or +half that direction d moves
+// towards (no_exit when it moves along neither).
+FREEFORM_HD inline float distance_to_wall(float o, float d, float half) {
+    return d > 0.0f ? (half - o) / d : d < 0.0f ? (-half - o) / d : no_exit;
+}
+
 // The segment met no surface: inside a lens body it leaves through the back face or a
 // side wall; otherwise the ray has left the surface and ends on the receiver (or misses
 // it).
@@ -205,46 +213,36 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
         // is counted as lost.
         const MaterialView& m = pp.material;
         for (;;) {
-            constexpr float far = 3.0e38f;
-            const float t_back = s.d.z < 0.0f ? (m.back_w - s.o.z) / s.d.z : far;
-            const float t_u = s.d.x > 0.0f   ? (m.half_u - s.o.x) / s.d.x
-                              : s.d.x < 0.0f ? (-m.half_u - s.o.x) / s.d.x
-                                             : far;
-            const float t_v = s.d.y > 0.0f   ? (m.half_v - s.o.y) / s.d.y
-                              : s.d.y < 0.0f ? (-m.half_v - s.o.y) / s.d.y
-                                             : far;
-            const float t_wall = std::fmin(t_u, t_v);
-            Vec3 out;
-            if (t_back <= t_wall) {
-                const Vec3 p = s.o + std::fmax(t_back, 0.0f) * s.d;
-                if (!refract(s.d, Vec3{0, 0, -1}, m.ior, 1.0f, out)) {
-                    s.status = RayStatus::lost_tir;
-                    break;
-                }
-                s.o = p;
-            } else {
-                if (!(t_wall < far)) {  // horizontal inside an unbounded body: cannot happen
-                    s.status = RayStatus::absorbed;
-                    break;
-                }
-                const Vec3 p = s.o + std::fmax(t_wall, 0.0f) * s.d;
-                const Vec3 n = t_u <= t_v ? Vec3{s.d.x > 0.0f ? 1.0f : -1.0f, 0, 0}
-                                          : Vec3{0, s.d.y > 0.0f ? 1.0f : -1.0f, 0};
-                s.o = p;
-                if (!refract(s.d, n, m.ior, 1.0f, out)) {
-                    if (++s.depth > pp.max_depth) {
-                        s.status = RayStatus::lost_depth;
-                        break;
-                    }
-                    s.d = reflect(s.d, n);
-                    continue;
-                }
+            const float t_back = s.d.z < 0.0f ? (m.back_w - s.o.z) / s.d.z : no_exit;
+            const float t_u = distance_to_wall(s.o.x, s.d.x, m.half_u);
+            const float t_v = distance_to_wall(s.o.y, s.d.y, m.half_v);
+            const float t = std::fmin(t_back, std::fmin(t_u, t_v));
+            if (!(t < no_exit)) {  // at rest or going straight up: no face ahead (rounding)
+                s.status = RayStatus::absorbed;
+                break;
             }
-            s.d = normalize(out);
-            s.inside = false;
-            s.exclude = -1;
-            s.status = RayStatus::active;
-            return true;  // one more segment: it may still meet nothing but the receiver
+            const bool back = t_back == t;
+            const Vec3 n = back          ? Vec3{0, 0, -1}
+                           : t_u <= t_v ? Vec3{s.d.x > 0.0f ? 1.0f : -1.0f, 0, 0}
+                                        : Vec3{0, s.d.y > 0.0f ? 1.0f : -1.0f, 0};
+            s.o = s.o + std::fmax(t, 0.0f) * s.d;
+            Vec3 out;
+            if (refract(s.d, n, m.ior, 1.0f, out)) {
+                s.d = normalize(out);
+                s.inside = false;
+                s.exclude = -1;
+                s.status = RayStatus::active;
+                return true;  // one more segment: it may still meet nothing but the receiver
+            }
+            if (back) {
+                s.status = RayStatus::lost_tir;
+                break;
+            }
+            if (++s.depth > pp.max_depth) {
+                s.status = RayStatus::lost_depth;
+                break;
+            }
+            s.d = reflect(s.d, n);
         }
     } else if (s.depth == 0) {
         s.status = RayStatus::missed_surface;
@@ -273,7 +271,7 @@ FREEFORM_HD inline void refractive_crossing(PathState& s, const SurfaceHit& hit,
         s.d = normalize(out);
         s.medium = to;
     } else {
-        s.d = s.d - (2.0f * dot(s.d, ns)) * ns;
+        s.d = reflect(s.d, ns);
     }
 }
 
