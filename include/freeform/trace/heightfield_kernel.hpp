@@ -31,6 +31,20 @@ struct NoCellVisitor {
     FREEFORM_HD void operator()(int, int) const {}
 };
 
+// Tells a visitor of crossed cells that the walk tests cell (ci, cj) over the segment's
+// height range z0..z1 (the ends of the walk over that cell, in the surface frame). A
+// visitor that takes (ci, cj, zlo, zhi) learns the range, which is what the cell's
+// culling test compares with its heights (the incremental evaluation uses it to skip rays
+// that pass a move's cells too high or too low to meet them, trace/incremental.hpp);
+// a visitor that takes (ci, cj) only learns the cell.
+template <class Visitor>
+FREEFORM_HD FREEFORM_FORCE_INLINE void visit_cell(Visitor& visit, int ci, int cj, float z0, float z1) {
+    if constexpr (requires { visit(ci, cj, z0, z1); })
+        visit(ci, cj, z0 < z1 ? z0 : z1, z0 > z1 ? z0 : z1);
+    else
+        visit(ci, cj);
+}
+
 // Triangle ids: cell (ci, cj) holds triangles 2c and 2c+1 with c = cj*(nx-1) + ci;
 // triangle 0 is (v00, v10, v11), triangle 1 is (v00, v11, v01).
 FREEFORM_HD inline void triangle_vertices(int nx, std::int32_t tri, int (&i)[3], int (&j)[3]) {
@@ -278,7 +292,7 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
         const float fi = float(ci), fj = float(cj);
         const float ex = gx + ad * t_len, ey = gy + bd * t_len;  // end of the segment
         if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) {
-            visit(ci, cj);
+            visit_cell(visit, ci, cj, ez + 0.0f * d.z, ez + t_len * d.z);
             return cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, 0.0f, t_len, t0, exclude, hit);
         }
     }
@@ -292,8 +306,9 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
     float tc = 0.0f;
     while (true) {
         const float tn = min_f(tn_i, tn_j);
-        visit(ci, cj);
-        if (cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, tc, min_f(tn, t_len), t0, exclude, hit))
+        const float tc_end = min_f(tn, t_len);
+        visit_cell(visit, ci, cj, ez + tc * d.z, ez + tc_end * d.z);
+        if (cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, tc, tc_end, t0, exclude, hit))
             return true;
         if (tn >= t_len) return false;
         if (tn_i < tn_j) {

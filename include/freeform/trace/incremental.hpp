@@ -26,6 +26,14 @@
 
 namespace freeform {
 
+// One cell a ray's path crosses inside the slab, with the height range of the path over
+// it (the range the walk's culling test compares with the cell's corner heights).
+// Visitors that know no range (Embree's) record the whole line: never culled.
+struct CellCrossing {
+    std::int32_t cell = 0;
+    float zlo = -INFINITY, zhi = INFINITY;
+};
+
 // Both directions of the ray <-> surface cell relation, updated in place.
 class RayCellIndex {
 public:
@@ -38,42 +46,50 @@ public:
         waste_ = 0;
     }
 
-    std::span<const std::int32_t> cells_of(std::int32_t ray) const {
+    std::span<const CellCrossing> cells_of(std::int32_t ray) const {
         return {pool_.data() + begin_[std::size_t(ray)], count_[std::size_t(ray)]};
     }
     const std::vector<std::int32_t>& rays_of(std::int32_t cell) const { return cell_rays_[std::size_t(cell)]; }
 
     // First assignment of a ray's cells (rays added in increasing order at build time).
-    void assign(std::int32_t ray, std::span<const std::int32_t> cells) {
+    void assign(std::int32_t ray, std::span<const CellCrossing> cells) {
         store(ray, cells);
-        for (auto c : cells) cell_rays_[std::size_t(c)].push_back(ray);
+        for (const auto& c : cells) cell_rays_[std::size_t(c.cell)].push_back(ray);
     }
 
-    // Replaces a ray's cells, touching only the cells that differ.
-    void replace(std::int32_t ray, std::span<const std::int32_t> cells) {
+    // Replaces a ray's cells (and their height ranges), touching only the cell lists that
+    // differ.
+    void replace(std::int32_t ray, std::span<const CellCrossing> cells) {
         const auto old = cells_of(ray);
-        const bool same = old.size() == cells.size() && std::equal(old.begin(), old.end(), cells.begin());
-        if (same) return;
-        for (auto c : old)
-            if (std::find(cells.begin(), cells.end(), c) == cells.end()) {
-                auto& list = cell_rays_[std::size_t(c)];
-                auto it = std::find(list.begin(), list.end(), ray);
-                *it = list.back();
-                list.pop_back();
-            }
-        for (auto c : cells)
-            if (std::find(old.begin(), old.end(), c) == old.end()) cell_rays_[std::size_t(c)].push_back(ray);
+        const auto has = [](std::span<const CellCrossing> list, std::int32_t cell) {
+            return std::find_if(list.begin(), list.end(), [&](const CellCrossing& c) { return c.cell == cell; }) !=
+                   list.end();
+        };
+        const bool same = old.size() == cells.size() &&
+                          std::equal(old.begin(), old.end(), cells.begin(),
+                                     [](const CellCrossing& a, const CellCrossing& b) { return a.cell == b.cell; });
+        if (!same) {
+            for (const auto& c : old)
+                if (!has(cells, c.cell)) {
+                    auto& list = cell_rays_[std::size_t(c.cell)];
+                    auto it = std::find(list.begin(), list.end(), ray);
+                    *it = list.back();
+                    list.pop_back();
+                }
+            for (const auto& c : cells)
+                if (!has(old, c.cell)) cell_rays_[std::size_t(c.cell)].push_back(ray);
+        }
         store(ray, cells);
     }
 
     std::size_t memory_bytes() const {
-        std::size_t b = pool_.capacity() * 4 + begin_.capacity() * 8 + count_.capacity() * 2 * 2;
+        std::size_t b = pool_.capacity() * sizeof(CellCrossing) + begin_.capacity() * 8 + count_.capacity() * 2 * 2;
         for (const auto& l : cell_rays_) b += l.capacity() * 4 + sizeof(l);
         return b;
     }
 
 private:
-    void store(std::int32_t ray, std::span<const std::int32_t> cells) {
+    void store(std::int32_t ray, std::span<const CellCrossing> cells) {
         const auto r = std::size_t(ray);
         if (cells.size() <= capacity_[r]) {
             std::copy(cells.begin(), cells.end(), pool_.begin() + begin_[r]);
@@ -82,13 +98,13 @@ private:
             begin_[r] = std::int64_t(pool_.size());
             capacity_[r] = std::uint16_t(std::min<std::size_t>(cells.size() + 2, 65535));
             pool_.insert(pool_.end(), cells.begin(), cells.end());
-            pool_.resize(pool_.size() + (capacity_[r] - cells.size()), -1);
+            pool_.resize(pool_.size() + (capacity_[r] - cells.size()), CellCrossing{-1});
         }
         count_[r] = std::uint16_t(cells.size());
         if (waste_ > std::int64_t(pool_.size() / 2) && pool_.size() > 4096) compact();
     }
     void compact() {
-        std::vector<std::int32_t> fresh;
+        std::vector<CellCrossing> fresh;
         fresh.reserve(pool_.size() - std::size_t(waste_));
         for (std::size_t r = 0; r < begin_.size(); ++r) {
             const std::int64_t b = std::int64_t(fresh.size());
@@ -99,31 +115,49 @@ private:
         waste_ = 0;
     }
 
-    std::vector<std::int32_t> pool_;
+    std::vector<CellCrossing> pool_;
     std::vector<std::int64_t> begin_;
     std::vector<std::uint16_t> count_, capacity_;
     std::vector<std::vector<std::int32_t>> cell_rays_;
     std::int64_t waste_ = 0;
 };
 
-// Collects the surface cells a traced path crosses. Called for every cell of every walk,
-// so it only skips an immediate repeat and is forced inline (an out-of-line call makes
-// the walk spill its registers); finish() removes the remaining repeats once per ray.
+// Collects the surface cells a traced path crosses, with the path's height range over
+// each. Called for every cell of every walk, so it only merges an immediate repeat and is
+// forced inline (an out-of-line call makes the walk spill its registers); finish() merges
+// the remaining repeats once per ray.
 struct CellCollector {
-    std::vector<std::int32_t>* out;
+    std::vector<CellCrossing>* out;
     std::size_t first;  // where this ray's cells start in *out
     int cells_per_row;
-    FREEFORM_FORCE_INLINE void operator()(int ci, int cj) const {
+    FREEFORM_FORCE_INLINE void operator()(int ci, int cj, float zlo, float zhi) const {
         const std::int32_t c = cj * cells_per_row + ci;
-        if (out->size() > first && out->back() == c) return;
-        out->push_back(c);
+        if (out->size() > first && out->back().cell == c) {
+            CellCrossing& last = out->back();
+            last.zlo = zlo < last.zlo ? zlo : last.zlo;
+            last.zhi = zhi > last.zhi ? zhi : last.zhi;
+            return;
+        }
+        out->push_back(CellCrossing{c, zlo, zhi});
     }
-    // Sorts this ray's cells and drops repeats (paths that come back over a cell).
+    // A tracer that does not know the path's height over the cell (whole line: never culled).
+    FREEFORM_FORCE_INLINE void operator()(int ci, int cj) const { (*this)(ci, cj, -INFINITY, INFINITY); }
+    // Sorts this ray's cells and merges repeats (paths that come back over a cell): the
+    // union of their height ranges.
     void finish() const {
         if (out->size() - first < 2) return;
         const auto begin = out->begin() + std::ptrdiff_t(first);
-        std::sort(begin, out->end());
-        out->erase(std::unique(begin, out->end()), out->end());
+        std::sort(begin, out->end(), [](const CellCrossing& a, const CellCrossing& b) { return a.cell < b.cell; });
+        auto w = begin;
+        for (auto r = begin + 1; r != out->end(); ++r) {
+            if (r->cell == w->cell) {
+                w->zlo = r->zlo < w->zlo ? r->zlo : w->zlo;
+                w->zhi = r->zhi > w->zhi ? r->zhi : w->zhi;
+            } else {
+                *++w = *r;
+            }
+        }
+        out->erase(w + 1, out->end());
     }
 };
 
@@ -132,12 +166,19 @@ struct CellCollector {
 struct TraceChange {
     std::vector<std::int32_t> rays;       // affected rays
     std::vector<RayRecord> records;       // their new records
-    std::vector<std::int32_t> cells;      // their new cell lists, packed
+    std::vector<CellCrossing> cells;      // their new cell lists, packed
     std::vector<std::int32_t> cell_begin; // rays.size() + 1 offsets into cells
     SparseDelta histogram;                // change of R
     std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
     std::int64_t rays_moved = 0;          // rays whose record changed
+    std::int64_t rays_culled = 0;         // rays listed on the move's cells that pass them out of reach
     std::vector<std::uint32_t> ray_mark;  // dedupe of affected rays (generation stamps)
+    // Height ranges of the move's cells before and after it, widened as the walk's
+    // culling test widens them (scratch of the ray selection).
+    struct CellReach {
+        float lo_before, hi_before, lo_after, hi_after;
+    };
+    std::vector<CellReach> reach;
     std::uint32_t generation = 0;
 
     void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
@@ -150,6 +191,7 @@ struct TraceChange {
         cell_begin.clear();
         status_delta.fill(0);
         rays_moved = 0;
+        rays_culled = 0;
         if (++generation == 0) {
             std::fill(ray_mark.begin(), ray_mark.end(), 0u);
             generation = 1;
@@ -178,7 +220,7 @@ public:
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
         const int chunks = std::max(1, thread_count(policy));
-        std::vector<std::vector<std::int32_t>> chunk_cells(static_cast<std::size_t>(chunks));
+        std::vector<std::vector<CellCrossing>> chunk_cells(static_cast<std::size_t>(chunks));
         std::vector<std::vector<std::int64_t>> chunk_begin(static_cast<std::size_t>(chunks));
         const HeightfieldView hf = surface_->view();
         for_each_chunk(policy, n, chunks, [&](int c, std::int64_t begin, std::int64_t end) {
@@ -214,7 +256,7 @@ public:
         const std::int64_t n = rays_->size();
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
-        std::vector<std::int32_t> cells;
+        std::vector<CellCrossing> cells;
         for (std::int64_t k = 0; k < n; ++k) {
             cells.clear();
             CellCollector visit{&cells, 0, surface_->nx() - 1};
@@ -261,7 +303,7 @@ public:
             change.cell_begin.push_back(0);
             return;
         }
-        collect_rays(affected_cells(o), change);
+        collect_rays(o, affected_cells(o), change);
         retrace_into(change, retrace);
     }
 
@@ -316,15 +358,53 @@ private:
 
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
 
-    void collect_rays(const Patch& cells, TraceChange& change) const {
+    // The rays listed on the move's cells that can meet one of them, before or after the
+    // move. A ray is left out when, on every one of those cells it crosses, its path lies
+    // wholly above or below the cell's corner heights (widened by the walk's rounding
+    // allowance) both before and after the move: the walk's culling test then skips the
+    // cell either way, so the ray's path, record and cells are what they were. This is the
+    // walk's own test on the same floats, so leaving the ray out is exact.
+    void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change) const {
         const int row = surface_->nx() - 1;
+        const int w = cells.width();
+        change.reach.resize(std::size_t(cells.count()));
+        {
+            const HeightfieldView before = surface_->view();
+            const OverlayView after = overlay_view(*surface_, o);
+            const float pad = hf_detail::grid_of(before).z_pad;
+            const auto range = [&](const auto& view, int ci, int cj, float& lo, float& hi) {
+                const hf_detail::Corners c = hf_detail::corners(view, ci, cj);
+                lo = min_f(min_f(c.h00, c.h10), min_f(c.h01, c.h11)) - pad;
+                hi = max_f(max_f(c.h00, c.h10), max_f(c.h01, c.h11)) + pad;
+            };
+            std::size_t k = 0;
+            for (int cj = cells.j0; cj <= cells.j1; ++cj)
+                for (int ci = cells.i0; ci <= cells.i1; ++ci, ++k) {
+                    TraceChange::CellReach& r = change.reach[k];
+                    range(before, ci, cj, r.lo_before, r.hi_before);
+                    range(after, ci, cj, r.lo_after, r.hi_after);
+                }
+        }
+        const auto reachable = [&](std::int32_t id) {
+            for (const CellCrossing& c : index_.cells_of(id)) {
+                const int ci = c.cell % row, cj = c.cell / row;
+                if (ci < cells.i0 || ci > cells.i1 || cj < cells.j0 || cj > cells.j1) continue;
+                const TraceChange::CellReach& r = change.reach[std::size_t((cj - cells.j0) * w + (ci - cells.i0))];
+                if ((c.zlo <= r.hi_before && c.zhi >= r.lo_before) || (c.zlo <= r.hi_after && c.zhi >= r.lo_after))
+                    return true;
+            }
+            return false;
+        };
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci)
                 for (auto id : index_.rays_of(cj * row + ci)) {
                     auto& mark = change.ray_mark[std::size_t(id)];
                     if (mark == change.generation) continue;
                     mark = change.generation;
-                    change.rays.push_back(id);
+                    if (reachable(id))
+                        change.rays.push_back(id);
+                    else
+                        ++change.rays_culled;
                 }
     }
 
