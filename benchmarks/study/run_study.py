@@ -82,8 +82,9 @@ def run_command(binary: Path, run: plan.Run, threads: int, out_file: Path, image
            "--out", str(out_file)]
     if case.case_patch:
         cmd += ["--case-patch", json.dumps(case.case_patch, separators=(",", ":"))]
-    if method.patch:
-        cmd += ["--patch", json.dumps(method.patch, separators=(",", ":"))]
+    patch = method.patch_for(run.case)
+    if patch:
+        cmd += ["--patch", json.dumps(patch, separators=(",", ":"))]
     cmd += list(method.options)
     if method.judged_with_check:
         cmd += ["--check-render"]
@@ -129,7 +130,8 @@ def main() -> int:
     ap.add_argument("--cases", help="comma-separated subset of cases")
     ap.add_argument("--methods", help="comma-separated subset of methods")
     ap.add_argument("--purposes", help="comma-separated subset of purposes (main, ablation, extra, stress, ladder, "
-                    "model, evaluation; quick mode: quick, evaluation)")
+                    "model, evaluation, goals; quick mode: quick, evaluation; outside the full plan, run only when "
+                    "named: stability-fixed, mesh-rule)")
     ap.add_argument("--seeds", type=int, help="at most this many seeds per group (a cheaper, less certain study)")
     ap.add_argument("--fresh", action="store_true", help="repeat runs whose results exist")
     ap.add_argument("--report-only", action="store_true", help="only aggregate the runs on disk")
@@ -140,6 +142,9 @@ def main() -> int:
     out_dir = args.out or (ROOT / "benchmarks/results" / ("quick" if args.quick else ""))
     out_dir = out_dir.resolve()
     runs = plan.quick_plan() if args.quick else plan.full_plan()
+    if args.purposes and not args.quick:
+        # Purposes outside the full plan (issue 11's stability-fixed and mesh-rule): only when named.
+        runs += plan.separate_plan(set(args.purposes.split(",")) & set(plan.SEPARATE_PURPOSES))
     if args.cases:
         keep = set(args.cases.split(","))
         runs = [r for r in runs if r.case in keep]
@@ -248,6 +253,14 @@ def main() -> int:
     if not meta_file.exists():
         print(f"run_study.py: no study in {out_dir} (run it first)", file=sys.stderr)
         return 1
+    if runs and all(r.purpose in plan.SEPARATE_PURPOSES for r in runs):
+        # Issue 11's own plans: their tables, not the full study's report.
+        import issue11_tables
+        purposes = {r.purpose for r in runs}
+        if len(purposes) == 1:
+            kind = "fixed" if "stability-fixed" in purposes else "mesh"
+            print(f"report: {issue11_tables.write_report(kind, out_dir)}")
+        return 0
     import study_report  # matplotlib is needed only from here on
 
     report = study_report.build(out_dir, json.loads(meta_file.read_text()), quick=(mode == "quick"))

@@ -48,6 +48,14 @@ class Method:
     # the plan's estimate counts for them.
     time_cap: float = 0.0
     expected: dict = field(default_factory=dict)
+    # Per-case iteration cap (case -> optimise.max_iterations), merged into the patch of
+    # each run (run_study.run_command): for iteration budgets that differ between cases.
+    iterations: dict = field(default_factory=dict)
+
+    def patch_for(self, case: str) -> dict:
+        if case in self.iterations:
+            return merged(self.patch, {"optimise": {"max_iterations": self.iterations[case]}})
+        return self.patch
 
 
 # --- cases -------------------------------------------------------------------------------
@@ -104,6 +112,31 @@ CASES = {c.name: c for c in [
          stress="grazing light: long paths through the height slab, foreshortened beam"),
 ]}
 
+# Targets the earlier passes never used (issue 11, part 4: the "auto" mesh rule checked off
+# the example targets), each on the setup of an example scene (light, surface, receiver,
+# budget), only the target replaced. The images are drawn by benchmarks/study/make_targets.py;
+# paths in a patch resolve against the scene file's directory (examples/scenes/).
+_STUDY_TARGETS = "../../benchmarks/study/targets/"
+
+
+def _image_target(name: str) -> dict:
+    return {"target": {"text": None, "font": None, "margin": None, "image": _STUDY_TARGETS + name}}
+
+
+NEW_TARGET_CASES = ["R", "amp", "ring", "checker", "gradient"]
+CASES.update({c.name: c for c in [
+    Case("R", "examples/scenes/letter-e.json", 12, case_patch={"target": {"text": "R"}},
+         title="letter R on the letter-E setup (collimated, mirror, 200² px)"),
+    Case("amp", "examples/scenes/point-light.json", 12, case_patch={"target": {"text": "&"}},
+         title="symbol & on the point-light setup (point light 0.3 m, elliptical 12 x 8 cm mirror, 240 x 160 px)"),
+    Case("ring", "examples/scenes/headlight.json", 5, case_patch=_image_target("ring.png"),
+         title="a bright ring on the headlight setup (collimated, mirror, 50² px)"),
+    Case("checker", "examples/scenes/lens.json", 12, case_patch=_image_target("checker.png"),
+         title="a 4 x 4 checkerboard through the lens setup (PMMA, 1.5 cm, ±12 mm bounds, 200² px)"),
+    Case("gradient", "examples/scenes/camera.json", 40, case_patch=_image_target("gradient.png"),
+         title="a smooth grey landscape (photographic: 65 % grey pixels) on the camera setup (200² px)"),
+]})
+
 PUBLIC_CASES = ["E", "V", "at", "headlight", "point", "lens", "camera"]
 # Where the flat-start runs of the earlier passes were made: the lens case then was lens-5mm.
 LEGACY_CASES = [c if c != "lens" else "lens-5mm" for c in PUBLIC_CASES]
@@ -115,6 +148,18 @@ SIMPLE_CASES = ["E", "V", "at", "headlight", "point", "lens"]  # failure rate 0 
 # (the history bandit's 1000-move pre-process included) and the safety time cap (seconds).
 PAIR_ITERATIONS = 2000
 PAIR_CAP = 3600.0
+
+# Issue 11, part 3: the fixed iteration count of each simple case, the median iterations of
+# ours' time-budget runs in benchmarks/results/model13 (12 s, headlight 5 s, 2 threads, the
+# 1000-move pre-process included) rounded to 500; the safety cap (seconds) that no run
+# reaches; and the seconds a run takes on one thread of the 2-core machine (estimate only).
+FIXED_ITERATIONS = {"E": 13000, "V": 12500, "at": 12500, "headlight": 13000, "point": 7000, "lens": 9000}
+FIXED_CAP = 3600.0
+FIXED_EXPECTED = {"E": 14.0, "V": 14.0, "at": 14.0, "headlight": 6.0, "point": 15.0, "lens": 15.0}
+
+# Issue 11, part 4: the mesh rule's comparison, at one budget for every case.
+MESH_AUTO = {"surface": {"mesh": "auto"}}
+MESH_RULE_BUDGET = 20.0
 
 _NO_PENALTIES = {"energy_threshold": 0, "sobel_weight": 0, "lost_light_weight": 0}
 
@@ -196,6 +241,22 @@ METHODS = {m.name: m for m in [
            "judged by a full retrace", patch=flat({"optimise": {"max_iterations": PAIR_ITERATIONS, "evaluation": "full"}}),
            options=("--progress-every", "20"), family="evaluation", time_cap=PAIR_CAP,
            expected={"headlight": 8.5, "E": 115}),
+    # Issue 11, part 3: ours (transport start and all) stopped at a fixed iteration count per
+    # case, no time limit (the time budget is only a safety cap): no clock decides anything,
+    # so the spread over seeds is the method's own, whatever the machine's load. The repeat
+    # runs the first seed again: the two must end with the same heights bit for bit.
+    Method("ours-iters", "design", "ours stopped at a fixed iteration count per case (FIXED_ITERATIONS: the median "
+           "iterations of the time-budget runs of benchmarks/results/model13), no time limit",
+           iterations=FIXED_ITERATIONS, family="stability", time_cap=FIXED_CAP, expected=FIXED_EXPECTED),
+    Method("ours-iters-repeat", "design", "ours-iters again (same seed): is the design reproducible?",
+           iterations=FIXED_ITERATIONS, family="stability", time_cap=FIXED_CAP, expected=FIXED_EXPECTED),
+    # Issue 11, part 4: the "auto" mesh rule against a mesh twice as fine, at equal time, from
+    # the transport start (ours-mesh2x above is from a flat start, earlier passes).
+    Method("ours-mesh-auto", "design", "ours with surface.mesh \"auto\" (r/2 + 1 vertices along the longer side for "
+           "a binary target, 2r + 1 for a photograph; the example scenes' explicit meshes are this rule's)",
+           patch=MESH_AUTO, family="mesh-rule"),
+    Method("ours-mesh-auto-x2", "design", "ours on twice the auto mesh per side ((n - 1)·2 + 1 vertices)",
+           patch=MESH_AUTO, options=("--mesh-scale", "2"), family="mesh-rule"),
     # Baselines on the same tracer and objective (control grid, see control_grid.hpp).
     Method("spsa", "spsa", "SPSA (Spall gains a_k = a/(k+1+A)^0.602, c_k = c/(k+1)^0.101), 13² control grid",
            family="baseline"),
@@ -308,6 +369,25 @@ def full_plan() -> list[Run]:
     runs += _grid([c for c in LEGACY_CASES if c != "camera"], ["ours-mesh2x"], SEEDS[:5], "model")
     runs += _grid(LEGACY_CASES, ["ours-rays4x"], SEEDS[:5], "model")
     runs += goal_runs(SEEDS)
+    return _unique(runs)
+
+
+# Plans that are not part of the full study (make bench): run only when --purposes names them.
+SEPARATE_PURPOSES = ("stability-fixed", "mesh-rule")
+
+
+def separate_plan(purposes) -> list[Run]:
+    runs = []
+    if "stability-fixed" in purposes:
+        runs += _grid(SIMPLE_CASES, ["ours-iters"], SEEDS, "stability-fixed")
+        runs += _grid(SIMPLE_CASES, ["ours-iters-repeat"], SEEDS[:1], "stability-fixed")
+    if "mesh-rule" in purposes:
+        # Interleaved by seed (auto, x2, auto, x2, ...), so that a change in the machine's
+        # load meets both arms alike.
+        for c in SIMPLE_CASES + NEW_TARGET_CASES:
+            for s in SEEDS:
+                for m in ("ours-mesh-auto", "ours-mesh-auto-x2"):
+                    runs.append(Run(c, m, s, MESH_RULE_BUDGET, "mesh-rule"))
     return _unique(runs)
 
 
