@@ -30,39 +30,39 @@ using Vec2 = Vec2T<float>;
 using Vec2d = Vec2T<double>;
 
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator+(Vec3T<T> a, Vec3T<T> b) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator+(Vec3T<T> a, Vec3T<T> b) {
     return {a.x + b.x, a.y + b.y, a.z + b.z};
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator-(Vec3T<T> a, Vec3T<T> b) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator-(Vec3T<T> a, Vec3T<T> b) {
     return {a.x - b.x, a.y - b.y, a.z - b.z};
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator-(Vec3T<T> a) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator-(Vec3T<T> a) {
     return {-a.x, -a.y, -a.z};
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator*(T s, Vec3T<T> a) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator*(T s, Vec3T<T> a) {
     return {s * a.x, s * a.y, s * a.z};
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator*(Vec3T<T> a, T s) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator*(Vec3T<T> a, T s) {
     return {s * a.x, s * a.y, s * a.z};
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> operator/(Vec3T<T> a, T s) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> operator/(Vec3T<T> a, T s) {
     return {a.x / s, a.y / s, a.z / s};
 }
 template <class T>
-FREEFORM_HD constexpr bool operator==(Vec3T<T> a, Vec3T<T> b) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr bool operator==(Vec3T<T> a, Vec3T<T> b) {
     return a.x == b.x && a.y == b.y && a.z == b.z;
 }
 template <class T>
-FREEFORM_HD constexpr T dot(Vec3T<T> a, Vec3T<T> b) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr T dot(Vec3T<T> a, Vec3T<T> b) {
     return a.x * b.x + a.y * b.y + a.z * b.z;
 }
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> cross(Vec3T<T> a, Vec3T<T> b) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> cross(Vec3T<T> a, Vec3T<T> b) {
     return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 template <class T>
@@ -76,7 +76,7 @@ FREEFORM_HD inline Vec3T<T> normalize(Vec3T<T> a) {
 
 // Mirror reflection of direction d about unit normal n (either orientation).
 template <class T>
-FREEFORM_HD constexpr Vec3T<T> reflect(Vec3T<T> d, Vec3T<T> n) {
+FREEFORM_HD FREEFORM_FORCE_INLINE constexpr Vec3T<T> reflect(Vec3T<T> d, Vec3T<T> n) {
     return d - (T(2) * dot(d, n)) * n;
 }
 

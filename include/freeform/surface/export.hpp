@@ -69,15 +69,7 @@ inline PhongVertex phong_vertex(const Heightmap& hm, std::int32_t tri, double b0
     }
     const Vec3d flat = b[0] * p[0] + b[1] * p[1] + b[2] * p[2];
     PhongVertex out;
-    // The same expression as phong_point: subtract alpha times the weighted projections
-    // of the flat point onto the three vertex tangent planes' normals.
-    if (alpha == 0.0) {
-        out.position = flat;
-    } else {
-        Vec3d offset{0, 0, 0};
-        for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - p[k], n[k])) * n[k];
-        out.position = flat - alpha * offset;
-    }
+    out.position = phong_point<double>(p, n, b, flat, alpha);
     out.normal = normalize(patch_normal<double>(p, n, b, flat, alpha));
     return out;
 }

@@ -2,6 +2,7 @@
 // HeightfieldTracer: the exact, BVH-free tracer for a scene made of one height field.
 // It handles mirrors (interreflections on the height field included, up to max_depth)
 // and lenses (front face = the height field, flat back face), with Phong correction.
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <string_view>
@@ -9,6 +10,7 @@
 
 #include "../core/exec.hpp"
 #include "heightfield_kernel.hpp"
+#include "packet.hpp"
 #include "tracer.hpp"
 
 namespace freeform {
@@ -37,6 +39,23 @@ public:
         for_each_chunk(policy, r.size(), chunks, [&](int c, std::int64_t begin, std::int64_t end) {
             Histogram& h = partial[std::size_t(c)];
             TraceTotals& t = partial_totals[std::size_t(c)];
+#if !defined(__CUDACC__)
+            if (packet::use_packets(params_)) {
+                const hf_detail::Grid g = hf_detail::grid_of(hf);
+                packet::NoLaneVisitor none;
+                RayRecord rec[packet::width];
+                for (std::int64_t k0 = begin; k0 < end; k0 += packet::width) {
+                    const int n = int(std::min<std::int64_t>(packet::width, end - k0));
+                    packet::trace_rays(hf, g, params_, r.origin.data() + k0, r.direction.data() + k0, n, rec, none);
+                    for (int l = 0; l < n; ++l) {
+                        const Fixed w = r.weight[std::size_t(k0 + l)];
+                        t.add(rec[l].status, w);
+                        deposit_record(params_.receiver, rec[l], w, h.cells);
+                    }
+                }
+                return;
+            }
+#endif
             for (std::int64_t k = begin; k < end; ++k) {
                 const RayRecord rec = trace_heightfield_ray(hf, params_, r.origin[std::size_t(k)],
                                                             r.direction[std::size_t(k)], NoCellVisitor{});
@@ -53,6 +72,24 @@ public:
     template <HostPolicy P>
     void trace(P policy, std::span<const std::int32_t> ids, std::span<RayRecord> records) const {
         const HeightfieldView hf = surface_->view();
+#if !defined(__CUDACC__)
+        if (packet::use_packets(params_)) {
+            const hf_detail::Grid g = hf_detail::grid_of(hf);
+            const std::int64_t packets = (std::int64_t(ids.size()) + packet::width - 1) / packet::width;
+            for_each(policy, packets, [&](std::int64_t p) {
+                const std::size_t k0 = std::size_t(p) * packet::width;
+                const int n = int(std::min<std::size_t>(packet::width, ids.size() - k0));
+                Vec3 o[packet::width], d[packet::width];
+                for (int l = 0; l < n; ++l) {
+                    const auto id = std::size_t(ids[k0 + std::size_t(l)]);
+                    o[l] = rays_->origin[id], d[l] = rays_->direction[id];
+                }
+                packet::NoLaneVisitor none;
+                packet::trace_rays(hf, g, params_, o, d, n, records.data() + k0, none);
+            });
+            return;
+        }
+#endif
         for_each(policy, std::int64_t(ids.size()), [&](std::int64_t k) {
             const auto id = std::size_t(ids[std::size_t(k)]);
             records[std::size_t(k)] =

@@ -23,6 +23,7 @@
 #include "../objective/image_terms.hpp"
 #include "../surface/overlay.hpp"
 #include "heightfield.hpp"
+#include "packet.hpp"
 
 namespace freeform {
 
@@ -161,6 +162,16 @@ struct CellCollector {
     }
 };
 
+// CellCollector for each lane of a packet (trace/packet.hpp).
+struct LaneCellCollector {
+    static constexpr bool active = true;
+    std::vector<CellCrossing>* lanes;
+    int cells_per_row;
+    FREEFORM_FORCE_INLINE void operator()(int l, int ci, int cj, float zlo, float zhi) const {
+        CellCollector{&lanes[l], 0, cells_per_row}(ci, cj, zlo, zhi);
+    }
+};
+
 // The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
 // commit(). Holds its own working memory so several can be evaluated concurrently.
 struct TraceChange {
@@ -179,6 +190,8 @@ struct TraceChange {
         float lo_before, hi_before, lo_after, hi_after;
     };
     std::vector<CellReach> reach;
+    std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
+    std::vector<std::vector<CellCrossing>> lane_cells;  // per packet lane (scratch of the packet retrace)
     std::uint32_t generation = 0;
 
     void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
@@ -226,6 +239,22 @@ public:
         for_each_chunk(policy, n, chunks, [&](int c, std::int64_t begin, std::int64_t end) {
             auto& cells = chunk_cells[std::size_t(c)];
             auto& starts = chunk_begin[std::size_t(c)];
+#if !defined(__CUDACC__)
+            if (packet::use_packets(params_)) {
+                std::vector<std::vector<CellCrossing>> lanes;
+                for (std::int64_t k0 = begin; k0 < end; k0 += packet::width) {
+                    const int count = int(std::min<std::int64_t>(packet::width, end - k0));
+                    trace_packet(hf, rays_->origin.data() + k0, rays_->direction.data() + k0, count,
+                                 records_.data() + k0, lanes);
+                    for (int l = 0; l < count; ++l) {
+                        starts.push_back(std::int64_t(cells.size()));
+                        cells.insert(cells.end(), lanes[std::size_t(l)].begin(), lanes[std::size_t(l)].end());
+                    }
+                }
+                starts.push_back(std::int64_t(cells.size()));
+                return;
+            }
+#endif
             for (std::int64_t k = begin; k < end; ++k) {
                 starts.push_back(std::int64_t(cells.size()));
                 CellCollector visit{&cells, cells.size(), surface_->nx() - 1};
@@ -288,6 +317,18 @@ public:
     // changing anything. Thread-safe for distinct `change` objects.
     void evaluate(const HeightOverlay& o, TraceChange& change) const {
         const OverlayView view = overlay_view(*surface_, o);
+#if !defined(__CUDACC__)
+        if (packet::use_packets(params_)) {
+            change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+            if (o.empty()) {
+                change.cell_begin.push_back(0);
+                return;
+            }
+            collect_rays(o, affected_cells(o), change);
+            retrace_packets_into(view, change);
+            return;
+        }
+#endif
         evaluate_with(o, change, [&](std::int32_t id, CellCollector& visit) {
             return trace_heightfield_ray(view, params_, rays_->origin[std::size_t(id)],
                                          rays_->direction[std::size_t(id)], visit);
@@ -314,6 +355,12 @@ public:
         change.rays.resize(std::size_t(rays_->size()));
         for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
         const OverlayView view = overlay_view(*surface_, o);
+#if !defined(__CUDACC__)
+        if (packet::use_packets(params_)) {
+            retrace_packets_into(view, change);
+            return;
+        }
+#endif
         retrace_into(change, [&](std::int32_t id, CellCollector& visit) {
             return trace_heightfield_ray(view, params_, rays_->origin[std::size_t(id)],
                                          rays_->direction[std::size_t(id)], visit);
@@ -339,21 +386,68 @@ private:
         change.records.resize(change.rays.size());
         change.cell_begin.resize(change.rays.size() + 1);
         for (std::size_t k = 0; k < change.rays.size(); ++k) {
-            const std::int32_t id = change.rays[k];
             change.cell_begin[k] = std::int32_t(change.cells.size());
             CellCollector visit{&change.cells, change.cells.size(), cells_per_row};
-            const RayRecord now = retrace(id, visit);
+            const RayRecord now = retrace(change.rays[k], visit);
             visit.finish();
-            change.records[k] = now;
-            const RayRecord& before = records_[std::size_t(id)];
-            if (now == before) continue;
-            ++change.rays_moved;
-            const Fixed w = rays_->weight[std::size_t(id)];
-            change.status_delta[std::size_t(before.status)] -= w;
-            change.status_delta[std::size_t(now.status)] += w;
-            move_deposit(before, now, w, change.histogram);
+            account(change, k, now);
         }
         change.cell_begin[change.rays.size()] = std::int32_t(change.cells.size());
+    }
+
+#if !defined(__CUDACC__)
+    // Traces up to packet::width rays in one packet: records into rec[0..n), the cells
+    // each crosses (merged and sorted as CellCollector::finish leaves them) into lanes[l].
+    template <class View>
+    void trace_packet(const View& view, const Vec3* o, const Vec3* d, int n, RayRecord* rec,
+                      std::vector<std::vector<CellCrossing>>& lanes) const {
+        const int row = surface_->nx() - 1;
+        lanes.resize(packet::width);
+        for (auto& l : lanes) l.clear();
+        LaneCellCollector visit{lanes.data(), row};
+        packet::trace_rays(view, hf_detail::grid_of(view), params_, o, d, n, rec, visit);
+        for (int l = 0; l < n; ++l) CellCollector{&lanes[std::size_t(l)], 0, row}.finish();
+    }
+
+    // retrace_into with the packet tracer, eight rays at a time.
+    template <class View>
+    void retrace_packets_into(const View& view, TraceChange& change) const {
+        const std::size_t n = change.rays.size();
+        change.records.resize(n);
+        change.cell_begin.resize(n + 1);
+        Vec3 o[packet::width], d[packet::width];
+        RayRecord rec[packet::width];
+        for (std::size_t k0 = 0; k0 < n; k0 += packet::width) {
+            const int count = int(std::min<std::size_t>(packet::width, n - k0));
+            for (int l = 0; l < count; ++l) {
+                const auto id = std::size_t(change.rays[k0 + std::size_t(l)]);
+                o[l] = rays_->origin[id], d[l] = rays_->direction[id];
+            }
+            trace_packet(view, o, d, count, rec, change.lane_cells);
+            for (int l = 0; l < count; ++l) {
+                const std::size_t k = k0 + std::size_t(l);
+                change.cell_begin[k] = std::int32_t(change.cells.size());
+                const auto& cells = change.lane_cells[std::size_t(l)];
+                change.cells.insert(change.cells.end(), cells.begin(), cells.end());
+                account(change, k, rec[l]);
+            }
+        }
+        change.cell_begin[n] = std::int32_t(change.cells.size());
+    }
+#endif
+
+    // Stores the new record of change.rays[k] and, if it differs from the maintained one,
+    // moves the ray's weight.
+    void account(TraceChange& change, std::size_t k, const RayRecord& now) const {
+        const std::int32_t id = change.rays[k];
+        change.records[k] = now;
+        const RayRecord& before = records_[std::size_t(id)];
+        if (now == before) return;
+        ++change.rays_moved;
+        const Fixed w = rays_->weight[std::size_t(id)];
+        change.status_delta[std::size_t(before.status)] -= w;
+        change.status_delta[std::size_t(now.status)] += w;
+        move_deposit(before, now, w, change.histogram);
     }
 
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
@@ -366,7 +460,6 @@ private:
     // walk's own test on the same floats, so leaving the ray out is exact.
     void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change) const {
         const int row = surface_->nx() - 1;
-        const int w = cells.width();
         change.reach.resize(std::size_t(cells.count()));
         {
             const HeightfieldView before = surface_->view();
@@ -385,11 +478,16 @@ private:
                     range(after, ci, cj, r.lo_after, r.hi_after);
                 }
         }
+        // Slot of each move cell in change.reach, looked up by cell id (no divisions).
+        auto& slot = change.cell_slot;
+        if (std::int64_t(slot.size()) != cell_count()) slot.assign(std::size_t(cell_count()), -1);
+        for (int cj = cells.j0, k = 0; cj <= cells.j1; ++cj)
+            for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = k++;
         const auto reachable = [&](std::int32_t id) {
             for (const CellCrossing& c : index_.cells_of(id)) {
-                const int ci = c.cell % row, cj = c.cell / row;
-                if (ci < cells.i0 || ci > cells.i1 || cj < cells.j0 || cj > cells.j1) continue;
-                const TraceChange::CellReach& r = change.reach[std::size_t((cj - cells.j0) * w + (ci - cells.i0))];
+                const std::int32_t k = slot[std::size_t(c.cell)];
+                if (k < 0) continue;
+                const TraceChange::CellReach& r = change.reach[std::size_t(k)];
                 if ((c.zlo <= r.hi_before && c.zhi >= r.lo_before) || (c.zlo <= r.hi_after && c.zhi >= r.lo_after))
                     return true;
             }
@@ -406,6 +504,8 @@ private:
                     else
                         ++change.rays_culled;
                 }
+        for (int cj = cells.j0; cj <= cells.j1; ++cj)
+            for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
     }
 
     // Removes a ray's old deposit and adds its new one. A ray that moves a little keeps

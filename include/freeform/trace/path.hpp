@@ -103,14 +103,28 @@ struct SurfaceHit {
     Vec3 n[3];                     // unit vertex normals (valid when kind != none)
 };
 
+// Picks a when c holds, else b. The packet tracer (trace/packet.hpp) adds overloads for
+// SIMD lanes, so the templates below serve one ray or a packet with the same operations.
+template <class T>
+FREEFORM_HD FREEFORM_FORCE_INLINE Vec3T<T> pick(bool c, Vec3T<T> a, Vec3T<T> b) {
+    return c ? a : b;
+}
+
 // Phong tessellation (Boubekeur & Alexa 2008): moves a flat hit onto the curved patch
 // defined by the vertex normals; alpha = 0 leaves it flat. Returns the corrected point.
+// T is float, double (the exporter), or a packet of floats (one ray per lane); alpha is
+// one number.
+template <class T, class A>
+FREEFORM_HD FREEFORM_FORCE_INLINE Vec3T<T> phong_point(const Vec3T<T> (&p)[3], const Vec3T<T> (&n)[3],
+                                                     const T (&b)[3], Vec3T<T> flat, A alpha) {
+    if (alpha == A(0)) return flat;
+    Vec3T<T> offset{T(0), T(0), T(0)};
+    for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - p[k], n[k])) * n[k];
+    return flat - T(alpha) * offset;
+}
 FREEFORM_HD inline Vec3 phong_point(const SurfaceHit& h, Vec3 flat, float alpha) {
-    if (alpha == 0.0f) return flat;
     const float b[3] = {h.b0, h.b1, h.b2};
-    Vec3 offset{0, 0, 0};
-    for (int k = 0; k < 3; ++k) offset = offset + (b[k] * dot(flat - h.p[k], h.n[k])) * h.n[k];
-    return flat - alpha * offset;
+    return phong_point<float>(h.p, h.n, b, flat, alpha);
 }
 
 // The interpolated vertex normal (unit). Not the normal of any surface: a mill follows
@@ -130,12 +144,13 @@ FREEFORM_HD inline Vec3 shading_normal(const SurfaceHit& h) {
 // alpha = 0 gives the flat facet's normal. This is the normal of the surface that is
 // exported and milled (surface/export.hpp); the patch is continuous across triangle
 // edges, its normal in general is not.
-template <class T>
-FREEFORM_HD inline Vec3T<T> patch_normal(const Vec3T<T> (&p)[3], const Vec3T<T> (&n)[3], const T (&b)[3],
-                                         Vec3T<T> flat, T alpha) {
+template <class T, class A>
+FREEFORM_HD FREEFORM_FORCE_INLINE Vec3T<T> patch_normal(const Vec3T<T> (&p)[3], const Vec3T<T> (&n)[3], const T (&b)[3],
+                                         Vec3T<T> flat, A alpha_in) {
     const Vec3T<T> e1 = p[1] - p[0], e2 = p[2] - p[0];
     const Vec3T<T> facet = cross(e1, e2);
-    if (alpha == T(0)) return facet;
+    if (alpha_in == A(0)) return facet;
+    const T alpha = T(alpha_in);
     const T s0 = dot(flat - p[0], n[0]), s1 = dot(flat - p[1], n[1]), s2 = dot(flat - p[2], n[2]);
     const T a0 = dot(e1, n[0]), a1 = dot(e1, n[1]), a2 = dot(e1, n[2]);
     const T c0 = dot(e2, n[0]), c1 = dot(e2, n[1]), c2 = dot(e2, n[2]);
@@ -144,7 +159,7 @@ FREEFORM_HD inline Vec3T<T> patch_normal(const Vec3T<T> (&p)[3], const Vec3T<T> 
     const Vec3T<T> m = cross(t1, t2);
     // A patch folded over itself (vertex normals far from the facet's) has no normal
     // there; the facet's is the nearest meaningful one.
-    return dot(m, facet) > T(0) ? m : facet;
+    return pick(dot(m, facet) > T(0), m, facet);
 }
 FREEFORM_HD inline Vec3 patch_normal(const SurfaceHit& h, Vec3 flat, float alpha) {
     const float b[3] = {h.b0, h.b1, h.b2};
