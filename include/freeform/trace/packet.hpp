@@ -347,7 +347,8 @@ inline void trace_rays(const View& hf, const hf_detail::Grid& g, const PathParam
          F([&](int l) { return l < n ? o[l].z : 1.0f; })};
     V pd{F([&](int l) { return l < n ? d[l].x : 0.0f; }), F([&](int l) { return l < n ? d[l].y : 0.0f; }),
          F([&](int l) { return l < n ? d[l].z : -1.0f; })};
-    I exclude(-1), depth(0), status(int(RayStatus::active));
+    I exclude(-1), depth(0);
+    I status = I(std::int32_t(RayStatus::active));
     F px(0.0f), py(0.0f);
     const I max_depth(pp.max_depth);
     Hits hits;
