@@ -86,8 +86,9 @@ def mesh(root: Path) -> str:
     out = []
     print = out.append  # noqa: A001
     print("| case | mesh auto → ×2 | seeds | auto: median error | ×2: median error | ×2 − auto | ×2 better "
-          "(same seed) | auto: exported | ×2: exported | rel. sd auto / ×2 | iterations auto / ×2 |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "(same seed) | auto: exported | ×2: exported | start alone auto / ×2 | rel. sd auto / ×2 "
+          "| iterations auto / ×2 |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     tally = {"old": [0, 0], "new": [0, 0]}
     for c in SIMPLE + NEW:
         a, b = load(root, c, "ours-mesh-auto"), load(root, c, "ours-mesh-auto-x2")
@@ -101,6 +102,8 @@ def mesh(root: Path) -> str:
         sa, sb = stats(ea), stats(eb)
         wins = sum(y < x for x, y in zip(ea, eb))
         ma, mb = a[seeds[0]]["model"]["mesh"], b[seeds[0]]["model"]["mesh"]
+        st_a = statistics.median(a[s]["start"]["error"] for s in seeds)
+        st_b = statistics.median(b[s]["start"]["error"] for s in seeds)
         ia = statistics.median(a[s]["iterations"] for s in seeds)
         ib = statistics.median(b[s]["iterations"] for s in seeds)
         group = "new" if c in NEW else "old"
@@ -108,7 +111,8 @@ def mesh(root: Path) -> str:
         tally[group][1] += 1
         print(f"| {NAMES.get(c, c)}{' (new)' if c in NEW else ''} | {ma[0]}×{ma[1]} → {mb[0]}×{mb[1]} | {len(seeds)} "
               f"| {sa['median']:.4f} | {sb['median']:.4f} | {sb['median'] - sa['median']:+.4f} | {wins}/{len(seeds)} "
-              f"| {statistics.median(xa):.4f} | {statistics.median(xb):.4f} | {pct(sa['rsd'])} / {pct(sb['rsd'])} "
+              f"| {statistics.median(xa):.4f} | {statistics.median(xb):.4f} | {st_a:.4f} / {st_b:.4f} "
+              f"| {pct(sa['rsd'])} / {pct(sb['rsd'])} "
               f"| {ia:.0f} / {ib:.0f} |")
     for g, (w, n) in tally.items():
         if n:
