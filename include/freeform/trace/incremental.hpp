@@ -319,13 +319,7 @@ public:
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
-            change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-            if (o.empty()) {
-                change.cell_begin.push_back(0);
-                return;
-            }
-            collect_rays(o, affected_cells(o), change);
-            retrace_packets_into(view, change);
+            if (select_rays(o, change)) retrace_packets_into(view, change);
             return;
         }
 #endif
@@ -339,13 +333,7 @@ public:
     // their own acceleration structure first, like Embree).
     template <class Retrace>
     void evaluate_with(const HeightOverlay& o, TraceChange& change, Retrace&& retrace) const {
-        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-        if (o.empty()) {
-            change.cell_begin.push_back(0);
-            return;
-        }
-        collect_rays(o, affected_cells(o), change);
-        retrace_into(change, retrace);
+        if (select_rays(o, change)) retrace_into(change, retrace);
     }
 
     // Retraces every ray against the surface with `o` applied: the reference's full
@@ -379,6 +367,18 @@ public:
     }
 
 private:
+    // Starts `change` for the move `o` and lists the rays it must retrace; false (and an
+    // empty change) when the move changes nothing.
+    bool select_rays(const HeightOverlay& o, TraceChange& change) const {
+        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+        if (o.empty()) {
+            change.cell_begin.push_back(0);
+            return false;
+        }
+        collect_rays(o, affected_cells(o), change);
+        return true;
+    }
+
     // Retraces change.rays and records what changed.
     template <class Retrace>
     void retrace_into(TraceChange& change, Retrace&& retrace) const {
