@@ -55,8 +55,8 @@ def intensity(x: float, y: float) -> float:
 
     The band is evenly lit (a regulation low beam asks for a minimum everywhere in it,
     not for a peak), so the pattern is mostly two-level: freeform's mesh "auto" then
-    treats it as a shape, not as a photograph, and picks the reference's 13 x 13 mesh
-    for a 50 x 50 receiver.
+    treats it as a shape, not as a photograph, and picks a 53 x 53 mesh for a 50 x 50
+    receiver (the reference used 13 x 13).
     """
     depth = y - cutoff_row(x)  # > 0 below the cut-off
     edge = smoothstep((depth + EDGE_SOFTNESS) / (2.0 * EDGE_SOFTNESS))

@@ -213,13 +213,13 @@ TEST_CASE("refinement keeps the corners and resamples a coarse grid exactly onto
 
 // ------------------------------------------------------------------------- the plan
 
-TEST_CASE("plan_levels: a 200² binary target gives 25²/51²/101² meshes on 50²/100²/200²") {
+TEST_CASE("plan_levels: a 200² binary target gives 51²/101²/201² meshes on 50²/100²/200²") {
     Scene s = auto_scene(200);
     const ImageD t = binary_target(200, 200);
     CHECK(target_grey_fraction(t) < 0.25);
     const auto levels = plan_levels(s, &t);
     REQUIRE(levels.size() == 3);
-    const int mesh[] = {25, 51, 101}, res[] = {50, 100, 200};
+    const int mesh[] = {51, 101, 201}, res[] = {50, 100, 200};
     for (std::size_t k = 0; k < 3; ++k) {
         CAPTURE(k);
         CHECK(levels[k].mesh_x == mesh[k]);
@@ -246,17 +246,17 @@ TEST_CASE("plan_levels: a 200² binary target gives 25²/51²/101² meshes on 50
     CHECK(given[2].mesh_x == 101);
 }
 
-TEST_CASE("plan_levels: a 50² headlight-like target gives 13² and 27² meshes on 25² and 50²") {
+TEST_CASE("plan_levels: a 50² headlight-like target gives 27² and 53² meshes on 25² and 50²") {
     const Scene s = auto_scene(50);
     const ImageD t = binary_target(50, 50);
     const auto levels = plan_levels(s, &t);
     REQUIRE(levels.size() == 2);
-    CHECK(levels[0].mesh_x == 13);
-    CHECK(levels[0].mesh_y == 13);
+    CHECK(levels[0].mesh_x == 27);
+    CHECK(levels[0].mesh_y == 27);
     CHECK(levels[0].resolution_x == 25);
     CHECK(levels[0].resolution_y == 25);
-    CHECK(levels[1].mesh_x == 27);
-    CHECK(levels[1].mesh_y == 27);
+    CHECK(levels[1].mesh_x == 53);
+    CHECK(levels[1].mesh_y == 53);
     CHECK(levels[1].resolution_x == 50);
     CHECK(levels[1].resolution_y == 50);
     CHECK(levels[0].time_share + levels[1].time_share == doctest::Approx(1.0));
@@ -286,12 +286,12 @@ TEST_CASE("plan_levels: multilevel off gives one level at the final mesh and res
     const ImageD t = binary_target(200, 200);
     const auto levels = plan_levels(s, &t);
     REQUIRE(levels.size() == 1);
-    CHECK(levels[0].mesh_x == 101);
+    CHECK(levels[0].mesh_x == 201);
     CHECK(levels[0].resolution_x == 200);
     CHECK(levels[0].time_share == 1.0);
-    CHECK(levels[0].iterations == 40LL * 101 * 101);
+    CHECK(levels[0].iterations == 40LL * 201 * 201);
     // Without a target (render), the mesh follows the binary rule.
-    CHECK(plan_levels(s, nullptr).back().mesh_x == 101);
+    CHECK(plan_levels(s, nullptr).back().mesh_x == 201);
 }
 
 TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every level") {
@@ -302,8 +302,8 @@ TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every lev
     const ImageD t = binary_target(240, 160);
     const auto levels = plan_levels(s, &t);
     REQUIRE(levels.size() == 3);
-    CHECK(levels.back().mesh_x == 121);
-    CHECK(levels.back().mesh_y == 81);
+    CHECK(levels.back().mesh_x == 241);
+    CHECK(levels.back().mesh_y == 161);
     for (const auto& l : levels) {
         CHECK(l.resolution_x * 2 == l.resolution_y * 3);
         CHECK(double(l.mesh_x - 1) / double(l.mesh_y - 1) == doctest::Approx(1.5).epsilon(0.1));
@@ -483,7 +483,7 @@ TEST_CASE("designing the irradiance of a known smooth surface gets within 0.06 o
 
 TEST_CASE("a short letter-E design gets the error down to 0.15") {
     // 50 x 50 receiver, one level on a 13 x 13 mesh (the reference's for a 50² target;
-    // "auto" would plan 27 x 27, four times the iterations). The E is drawn with a
+    // "auto" would plan 53 x 53, sixteen times the iterations). The E is drawn with a
     // 25 % margin, about the size of the spot the flat mirror throws (half the receiver):
     // the design redistributes the light rather than first spreading it. The budget is
     // the plan's own (40 iterations per vertex), without the history bandit's trial run:

@@ -123,20 +123,24 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
 
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
-//   target: binary shapes get r/2 + 1 vertices along the longer side (made odd: 27 for
-//   the 50² headlight, where the reference used 13²; the study, benchmarks/results/
-//   REPORT.md, found 13² twice the error of 25² at equal time), photographs 2r + 1 (the
-//   reference's 401² for a 200² photo); the shorter side follows the surface's aspect
-//   ratio.
-//   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (the
-//   reference's 50² → 200² with 25² → 101²); one level when `multilevel` is off.
+//   target: binary shapes get about one cell per receiver pixel along the longer side,
+//   2m − 1 vertices with m = r/2 + 1 made odd (201 for a 200² letter, 53 for the 50²
+//   headlight, where the reference used 13²), photographs 2r + 1 (the reference's 401²
+//   for a 200² photo); the shorter side follows the surface's aspect ratio. Measured at
+//   equal time (benchmarks/results/mesh_rule, issue 11): the binary rule's former m
+//   (101² for 200²) ended above 2m − 1 on every seed of ten binary targets; on a
+//   photograph 4r + 1 was level with 2r + 1 (its exported mesh worse) at four times the
+//   memory. The earlier study found 13² twice the error of 25² on the headlight.
+//   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (a 200²
+//   letter: 51², 101², 201² on 50, 100, 200 px; the reference had 25² → 101²); one level
+//   when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
 inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* target) {
     const int rx = scene.receiver.width, ry = scene.receiver.height, r = std::max(rx, ry);
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
         const bool photo = target && target_grey_fraction(resample_area(*target, rx, ry)) > 0.25;
-        int mesh = photo ? 2 * r + 1 : r / 2 + 1;
+        int mesh = photo ? 2 * r + 1 : 2 * ((r / 2 + 1) | 1) - 1;
         mesh = std::max(5, mesh | 1);
         const Vec2d size = scene.surface.size;
         mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
