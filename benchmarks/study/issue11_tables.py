@@ -55,9 +55,9 @@ def pct(x):
 def fixed(stab: Path, timed: Path) -> str:
     out = []
     print = out.append  # noqa: A001 (the table as lines)
-    print("| case | iterations | seeds | fixed iterations: median | min–max | sd | **rel. sd (fixed iterations)** "
+    print("| case | mesh | iterations | seeds | fixed iterations: median | min–max | sd | **rel. sd (fixed iterations)** "
           "| time budget | seeds | time budget: median | **rel. sd (time budget)** | repeat of seed 101 |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for c in SIMPLE:
         runs = load(stab, c, "ours-iters")
         if not runs:
@@ -67,6 +67,9 @@ def fixed(stab: Path, timed: Path) -> str:
         t_runs = load(timed, c, "ours")
         t = stats([r["final"]["error"] for r in t_runs.values()]) if t_runs else None
         budget = statistics.median(r["time_budget"] for r in t_runs.values()) if t_runs else None
+        t_mesh = "/".join(sorted({"×".join(map(str, r["model"]["mesh"])) for r in t_runs.values()}))
+        t_mesh = f" (mesh {t_mesh})" if t_mesh and t_mesh != "/".join(sorted({"×".join(map(str, r["model"]["mesh"]))
+                                                                           for r in runs.values()})) else ""
         rep = load(stab, c, "ours-iters-repeat")
         same = "—"
         if rep:
@@ -75,9 +78,10 @@ def fixed(stab: Path, timed: Path) -> str:
             if a:
                 same = ("same heights bit for bit" if a["final"]["heights_fingerprint"] == b["final"]["heights_fingerprint"]
                         else "**differs**") + f" ({a['seconds']:.1f} s / {b['seconds']:.1f} s)"
-        print(f"| {NAMES.get(c, c)} | {'/'.join(map(str, its))} | {s['n']} | {s['median']:.4f} | "
+        mesh_ = "/".join(sorted({"×".join(map(str, r["model"]["mesh"])) for r in runs.values()}))
+        print(f"| {NAMES.get(c, c)} | {mesh_} | {'/'.join(map(str, its))} | {s['n']} | {s['median']:.4f} | "
               f"{s['min']:.4f}–{s['max']:.4f} | {s['sd']:.5f} | **{pct(s['rsd'])}** | "
-              + (f"{budget:g} s | {t['n']} | {t['median']:.4f} | **{pct(t['rsd'])}** | " if t else "— | — | — | — | ")
+              + (f"{budget:g} s{t_mesh} | {t['n']} | {t['median']:.4f} | **{pct(t['rsd'])}** | " if t else "— | — | — | — | ")
               + same + " |")
     return "\n".join(out) + "\n"
 
@@ -147,8 +151,10 @@ time-budget runs of `benchmarks/results/model13`, rounded to 500; the time budge
 is only a safety cap that no stage reaches: every stage stopped on `max_iterations`),
 10 seeds per simple case. Nothing in such a run depends on the clock (the stages'
 temperatures come from 48 trial moves, not from a timed calibration, and the iteration
-budgets from the plan), so its result is the same on any machine under any load: the
-repeat of seed 101 (`ours-iters-repeat`) checks it on every case. The columns marked
+budgets from the plan), so for a given build its result is the same under any load and
+on any machine: the repeat of seed 101 (`ours-iters-repeat`) checks it on every case.
+Builds with other instruction sets (FREEFORM_ARCH) may differ in the last bits (the
+transport start) and then follow another trajectory. The columns marked
 "time budget" are `ours` at the study's budgets (12 s, headlight 5 s, 2 threads) from
 `benchmarks/results/model13`, the same cases and seeds. Relative sd: sample sd / mean.
 
