@@ -26,3 +26,13 @@
 
 // Assertions inside kernels: checked in debug builds on both host and device.
 #define FREEFORM_KERNEL_ASSERT(cond) assert(cond)
+
+namespace freeform {
+// A hint that `p` will be read soon (host code that walks scattered indices). No effect
+// on results; a no-op where the compiler has no such builtin.
+FREEFORM_FORCE_INLINE void prefetch([[maybe_unused]] const void* p) {
+#if defined(__GNUC__) && !defined(__CUDA_ARCH__)
+    __builtin_prefetch(p);
+#endif
+}
+}  // namespace freeform

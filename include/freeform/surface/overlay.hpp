@@ -83,11 +83,11 @@ struct OverlayView : HeightfieldView {
     int pi0 = 0, pj0 = 0, pw = 0, ph = 0;
     int ni0 = 0, nj0 = 0, nw = 0, nh = 0;
 
-    FREEFORM_HD float height(int i, int j) const {
+    FREEFORM_HD FREEFORM_FORCE_INLINE float height(int i, int j) const {
         const unsigned a = unsigned(i - pi0), b = unsigned(j - pj0);
         return a < unsigned(pw) && b < unsigned(ph) ? oh[b * pw + a] : HeightfieldView::height(i, j);
     }
-    FREEFORM_HD Vec3 normal(int i, int j) const {
+    FREEFORM_HD FREEFORM_FORCE_INLINE Vec3 normal(int i, int j) const {
         const unsigned a = unsigned(i - ni0), b = unsigned(j - nj0);
         return a < unsigned(nw) && b < unsigned(nh) ? on[b * nw + a] : HeightfieldView::normal(i, j);
     }

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -123,6 +124,29 @@ private:
     std::int64_t waste_ = 0;
 };
 
+// Sorts cells[0..n) by cell and merges repeats (paths that come back over a cell) into
+// one crossing with the union of their height ranges; returns the new count. The lists
+// are short (one to a few cells for most rays): insertion sort.
+inline std::size_t sort_merge_cells(CellCrossing* cells, std::size_t n) {
+    if (n < 2) return n;
+    for (std::size_t k = 1; k < n; ++k) {
+        const CellCrossing x = cells[k];
+        std::size_t j = k;
+        for (; j > 0 && cells[j - 1].cell > x.cell; --j) cells[j] = cells[j - 1];
+        cells[j] = x;
+    }
+    std::size_t w = 0;
+    for (std::size_t r = 1; r < n; ++r) {
+        if (cells[r].cell == cells[w].cell) {
+            cells[w].zlo = cells[r].zlo < cells[w].zlo ? cells[r].zlo : cells[w].zlo;
+            cells[w].zhi = cells[r].zhi > cells[w].zhi ? cells[r].zhi : cells[w].zhi;
+        } else {
+            cells[++w] = cells[r];
+        }
+    }
+    return w + 1;
+}
+
 // Collects the surface cells a traced path crosses, with the path's height range over
 // each. Called for every cell of every walk, so it only merges an immediate repeat and is
 // forced inline (an out-of-line call makes the walk spill its registers); finish() merges
@@ -143,34 +167,46 @@ struct CellCollector {
     }
     // A tracer that does not know the path's height over the cell (whole line: never culled).
     FREEFORM_FORCE_INLINE void operator()(int ci, int cj) const { (*this)(ci, cj, -INFINITY, INFINITY); }
-    // Sorts this ray's cells and merges repeats (paths that come back over a cell): the
-    // union of their height ranges.
+    // Sorts this ray's cells and merges repeats: the union of their height ranges.
     void finish() const {
-        if (out->size() - first < 2) return;
-        const auto begin = out->begin() + std::ptrdiff_t(first);
-        std::sort(begin, out->end(), [](const CellCrossing& a, const CellCrossing& b) { return a.cell < b.cell; });
-        auto w = begin;
-        for (auto r = begin + 1; r != out->end(); ++r) {
-            if (r->cell == w->cell) {
-                w->zlo = r->zlo < w->zlo ? r->zlo : w->zlo;
-                w->zhi = r->zhi > w->zhi ? r->zhi : w->zhi;
-            } else {
-                *++w = *r;
-            }
-        }
-        out->erase(w + 1, out->end());
+        out->resize(first + sort_merge_cells(out->data() + first, out->size() - first));
     }
 };
 
-// CellCollector for each lane of a packet (trace/packet.hpp).
-struct LaneCellCollector {
+#if !defined(__CUDACC__)
+// The cells each lane of a packet crosses (trace/packet.hpp's lane visitor), in fixed
+// arrays: the packet walk is inlined whole, and a call or an allocation inside it would
+// make it spill its registers. A lane whose path crosses more cells than fit is marked
+// in `overflow` and retraced by the scalar kernel (same record, tests/test_packet.cpp).
+struct LaneCellBuffer {
     static constexpr bool active = true;
-    std::vector<CellCrossing>* lanes;
-    int cells_per_row;
-    FREEFORM_FORCE_INLINE void operator()(int l, int ci, int cj, float zlo, float zhi) const {
-        CellCollector{&lanes[l], 0, cells_per_row}(ci, cj, zlo, zhi);
+    static constexpr int capacity = 48;
+    int cells_per_row = 0;
+    std::uint32_t overflow = 0;  // bit l: lane l ran out of room
+    int count[packet::width] = {};
+    CellCrossing cell[packet::width][capacity];
+
+    void clear() {
+        overflow = 0;
+        for (int& n : count) n = 0;
+    }
+    FREEFORM_FORCE_INLINE void operator()(int l, int ci, int cj, float zlo, float zhi) {
+        const std::int32_t c = cj * cells_per_row + ci;
+        int& n = count[l];
+        if (n > 0 && cell[l][n - 1].cell == c) {
+            CellCrossing& last = cell[l][n - 1];
+            last.zlo = zlo < last.zlo ? zlo : last.zlo;
+            last.zhi = zhi > last.zhi ? zhi : last.zhi;
+            return;
+        }
+        if (n == capacity) {
+            overflow |= 1u << l;
+            return;
+        }
+        cell[l][n++] = CellCrossing{c, zlo, zhi};
     }
 };
+#endif
 
 // The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
 // commit(). Holds its own working memory so several can be evaluated concurrently.
@@ -191,7 +227,9 @@ struct TraceChange {
     };
     std::vector<CellReach> reach;
     std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
-    std::vector<std::vector<CellCrossing>> lane_cells;  // per packet lane (scratch of the packet retrace)
+#if !defined(__CUDACC__)
+    LaneCellBuffer lane_cells;  // scratch of the packet retrace
+#endif
     std::uint32_t generation = 0;
 
     void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
@@ -241,14 +279,16 @@ public:
             auto& starts = chunk_begin[std::size_t(c)];
 #if !defined(__CUDACC__)
             if (packet::use_packets(params_)) {
-                std::vector<std::vector<CellCrossing>> lanes;
+                auto lanes = std::make_unique<LaneCellBuffer>();
+                const hf_detail::Grid grid = hf_detail::grid_of(hf);
                 for (std::int64_t k0 = begin; k0 < end; k0 += packet::width) {
                     const int count = int(std::min<std::int64_t>(packet::width, end - k0));
-                    trace_packet(hf, rays_->origin.data() + k0, rays_->direction.data() + k0, count,
-                                 records_.data() + k0, lanes);
+                    const Vec3* o = rays_->origin.data() + k0;
+                    const Vec3* d = rays_->direction.data() + k0;
+                    trace_packet(hf, grid, o, d, count, records_.data() + k0, *lanes);
                     for (int l = 0; l < count; ++l) {
                         starts.push_back(std::int64_t(cells.size()));
-                        cells.insert(cells.end(), lanes[std::size_t(l)].begin(), lanes[std::size_t(l)].end());
+                        append_lane_cells(hf, *lanes, l, o[l], d[l], records_[std::size_t(k0 + l)], cells);
                     }
                 }
                 starts.push_back(std::int64_t(cells.size()));
@@ -397,16 +437,28 @@ private:
 
 #if !defined(__CUDACC__)
     // Traces up to packet::width rays in one packet: records into rec[0..n), the cells
-    // each crosses (merged and sorted as CellCollector::finish leaves them) into lanes[l].
+    // each crosses into `lanes`.
     template <class View>
-    void trace_packet(const View& view, const Vec3* o, const Vec3* d, int n, RayRecord* rec,
-                      std::vector<std::vector<CellCrossing>>& lanes) const {
-        const int row = surface_->nx() - 1;
-        lanes.resize(packet::width);
-        for (auto& l : lanes) l.clear();
-        LaneCellCollector visit{lanes.data(), row};
-        packet::trace_rays(view, hf_detail::grid_of(view), params_, o, d, n, rec, visit);
-        for (int l = 0; l < n; ++l) CellCollector{&lanes[std::size_t(l)], 0, row}.finish();
+    void trace_packet(const View& view, const hf_detail::Grid& grid, const Vec3* o, const Vec3* d, int n,
+                      RayRecord* rec, LaneCellBuffer& lanes) const {
+        lanes.cells_per_row = surface_->nx() - 1;
+        lanes.clear();
+        packet::trace_rays(view, grid, params_, o, d, n, rec, lanes);
+    }
+
+    // Appends lane l's cells (sorted and merged, as CellCollector::finish leaves them) to
+    // `out`; a lane that overflowed its buffer is retraced by the scalar kernel.
+    template <class View>
+    void append_lane_cells(const View& view, LaneCellBuffer& lanes, int l, Vec3 o, Vec3 d, RayRecord& rec,
+                           std::vector<CellCrossing>& out) const {
+        if (lanes.overflow >> l & 1u) {
+            CellCollector visit{&out, out.size(), surface_->nx() - 1};
+            rec = trace_heightfield_ray(view, params_, o, d, visit);
+            visit.finish();
+            return;
+        }
+        const std::size_t n = sort_merge_cells(lanes.cell[l], std::size_t(lanes.count[l]));
+        out.insert(out.end(), lanes.cell[l], lanes.cell[l] + n);
     }
 
     // retrace_into with the packet tracer, eight rays at a time.
@@ -415,20 +467,29 @@ private:
         const std::size_t n = change.rays.size();
         change.records.resize(n);
         change.cell_begin.resize(n + 1);
+        const hf_detail::Grid grid = hf_detail::grid_of(view);
         Vec3 o[packet::width], d[packet::width];
         RayRecord rec[packet::width];
         for (std::size_t k0 = 0; k0 < n; k0 += packet::width) {
             const int count = int(std::min<std::size_t>(packet::width, n - k0));
+            // The rays of a move are scattered over the ray arrays: ask for the next
+            // packet's data now, so that it arrives while this packet is traced.
+            for (std::size_t k = k0 + packet::width; k < std::min(n, k0 + 2 * packet::width); ++k) {
+                const auto id = std::size_t(change.rays[k]);
+                prefetch(rays_->origin.data() + id);
+                prefetch(rays_->direction.data() + id);
+                prefetch(rays_->weight.data() + id);
+                prefetch(records_.data() + id);
+            }
             for (int l = 0; l < count; ++l) {
                 const auto id = std::size_t(change.rays[k0 + std::size_t(l)]);
                 o[l] = rays_->origin[id], d[l] = rays_->direction[id];
             }
-            trace_packet(view, o, d, count, rec, change.lane_cells);
+            trace_packet(view, grid, o, d, count, rec, change.lane_cells);
             for (int l = 0; l < count; ++l) {
                 const std::size_t k = k0 + std::size_t(l);
                 change.cell_begin[k] = std::int32_t(change.cells.size());
-                const auto& cells = change.lane_cells[std::size_t(l)];
-                change.cells.insert(change.cells.end(), cells.begin(), cells.end());
+                append_lane_cells(view, change.lane_cells, l, o[l], d[l], rec[l], change.cells);
                 account(change, k, rec[l]);
             }
         }

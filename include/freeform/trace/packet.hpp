@@ -22,6 +22,7 @@
 #include <experimental/simd>
 
 #include <cstdint>
+#include <type_traits>
 
 #include "heightfield_kernel.hpp"
 
@@ -31,8 +32,10 @@ namespace packet {
 
 namespace stdx = std::experimental;
 inline constexpr int width = 8;
-using F = stdx::fixed_size_simd<float, width>;
-using I = stdx::fixed_size_simd<std::int32_t, width>;
+// The build's own eight-lane type where it has one (one AVX register: every operation
+// inlines to a single instruction), else fixed_size<8>; the lanes are the same either way.
+using F = stdx::simd<float, stdx::simd_abi::deduce_t<float, width>>;
+using I = stdx::simd<std::int32_t, stdx::simd_abi::deduce_t<std::int32_t, width>>;
 using FM = F::mask_type;
 using IM = I::mask_type;
 
@@ -86,16 +89,30 @@ struct NoLaneVisitor {
 
 namespace detail {
 
-inline F to_f(I v) { return stdx::static_simd_cast<F>(v); }
-inline I to_i(F v) { return stdx::static_simd_cast<I>(v); }
-inline FM fm(IM m) { return FM(m); }
+FREEFORM_FORCE_INLINE F to_f(I v) { return stdx::static_simd_cast<F>(v); }
+FREEFORM_FORCE_INLINE I to_i(F v) { return stdx::static_simd_cast<I>(v); }
+// Masks of floats and of ints: the TS converts only fixed_size masks implicitly;
+// libstdc++'s static_simd_cast extension converts native ones.
+template <class M = IM>
+FREEFORM_FORCE_INLINE FM fm(M m) {
+    if constexpr (std::is_same_v<typename M::abi_type, stdx::simd_abi::fixed_size<width>>)
+        return FM(m);
+    else
+        return stdx::__proposed::static_simd_cast<FM>(m);
+}
 // Bit l set where lane l of m is set.
-inline unsigned lane_bits(FM m) {
+FREEFORM_FORCE_INLINE unsigned lane_bits(FM m) {
     unsigned b = 0;
     for (int l = 0; l < width; ++l) b |= m[l] ? 1u << l : 0u;
     return b;
 }
-inline IM im(FM m) { return IM(m); }
+template <class M = FM>
+FREEFORM_FORCE_INLINE IM im(M m) {
+    if constexpr (std::is_same_v<typename M::abi_type, stdx::simd_abi::fixed_size<width>>)
+        return IM(m);
+    else
+        return stdx::__proposed::static_simd_cast<IM>(m);
+}
 
 // One lane's values, written by scalar code and read as a packet.
 struct alignas(32) Lanes {
@@ -228,6 +245,23 @@ inline void store_lane(Hits& hits, int l, const SurfaceHit& h) {
     }
 }
 
+// The lanes of `lanes` walked by the scalar kernel (rare: kept out of line, so that the
+// packet walk below can be inlined whole).
+template <class View, class Visitor>
+[[gnu::noinline]] void scalar_lanes(const View& hf, const hf_detail::Grid& g, FM lanes, const V& o, const V& d,
+                                    I exclude, Visitor& visit, Hits& hits) {
+    for (int l = 0; l < width; ++l) {
+        if (!lanes[l]) continue;
+        SurfaceHit h;
+        auto lane_visit = [&](int ci, int cj, float zlo, float zhi) {
+            if constexpr (Visitor::active) visit(l, ci, cj, zlo, zhi);
+        };
+        hf_detail::walk<true>(hf, g, Vec3{o.x[l], o.y[l], o.z[l]}, Vec3{d.x[l], d.y[l], d.z[l]}, exclude[l],
+                              lane_visit, h);
+        store_lane(hits, l, h);
+    }
+}
+
 // The nearest front-side hit of every lane's segment (o, d) in m: walk<true> of
 // heightfield_kernel.hpp. Lanes whose segment needs the walk's rare set-up (entry beside
 // the grid, a direction parallel to the surface plane) are walked by the scalar kernel.
@@ -250,18 +284,7 @@ inline void nearest_hits(const View& hf, const hf_detail::Grid& g, FM m, const V
     // The scalar kernel takes the lanes that start beside the grid or move parallel to it.
     const FM scalar = m && (flat_dir || ((t0 <= t1) && !on_grid));
     go = go && on_grid;
-    if (stdx::any_of(scalar)) {
-        for (int l = 0; l < width; ++l) {
-            if (!scalar[l]) continue;
-            SurfaceHit h;
-            auto lane_visit = [&](int ci, int cj, float zlo, float zhi) {
-                if constexpr (Visitor::active) visit(l, ci, cj, zlo, zhi);
-            };
-            hf_detail::walk<true>(hf, g, Vec3{o.x[l], o.y[l], o.z[l]}, Vec3{d.x[l], d.y[l], d.z[l]}, exclude[l],
-                                  lane_visit, h);
-            store_lane(hits, l, h);
-        }
-    }
+    if (stdx::any_of(scalar)) scalar_lanes(hf, g, scalar, o, d, exclude, visit, hits);
     if (stdx::none_of(go)) return;
     w.t0 = t0;
     w.dz = d.z;
@@ -318,7 +341,7 @@ inline void nearest_hits(const View& hf, const hf_detail::Grid& g, FM m, const V
 // ReceiverView::hit in every lane: `reaches` holds where the scalar version computes
 // (px, py) (it writes them even when they fall outside the receiver), the result where it
 // returns true.
-inline FM receiver_hit(const ReceiverView& rv, const V& o, const V& d, F& px, F& py, FM& reaches) {
+FREEFORM_FORCE_INLINE FM receiver_hit(const ReceiverView& rv, const V& o, const V& d, F& px, F& py, FM& reaches) {
     const V n{F(rv.n.x), F(rv.n.y), F(rv.n.z)};
     const V c{F(rv.center.x), F(rv.center.y), F(rv.center.z)};
     const V u{F(rv.u.x), F(rv.u.y), F(rv.u.z)}, v{F(rv.v.x), F(rv.v.y), F(rv.v.z)};
@@ -341,7 +364,7 @@ template <class View, class Visitor>
 inline void trace_rays(const View& hf, const hf_detail::Grid& g, const PathParams& pp, const Vec3* o, const Vec3* d,
                        int n, RayRecord* out, Visitor& visit) {
     using namespace detail;
-    const FM active_init = I([](int l) { return l; }) < I(n);
+    const FM active_init = fm(I([](int l) { return l; }) < I(n));
     FM active = active_init;
     V po{F([&](int l) { return l < n ? o[l].x : 0.0f; }), F([&](int l) { return l < n ? o[l].y : 0.0f; }),
          F([&](int l) { return l < n ? o[l].z : 1.0f; })};
