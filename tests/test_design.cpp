@@ -11,6 +11,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <freeform/design/designer.hpp>
@@ -353,6 +354,59 @@ TEST_CASE("same seed, same result; any thread count and speculation width, same 
     CHECK_FALSE(same_bits(a.surface.heights(), b.surface.heights()));
     CHECK_FALSE(a.irradiance == b.irradiance);
     CHECK(a.value.error != b.value.error);
+}
+
+// ------------------------------------------------------------------------- replicas
+
+namespace {
+
+// A replica that makes the design's start (replicas.hpp, share_start) and keeps it.
+struct StartMaker : SingleReplica {
+    int calls = 0;
+    SharedStart made;
+    SharedStart share_start(const std::function<SharedStart()>& make) {
+        ++calls;
+        made = make();
+        return made;
+    }
+};
+
+// A replica that is handed the start another replica made, and makes none itself.
+struct StartTaker : SingleReplica {
+    const SharedStart* given = nullptr;
+    SharedStart share_start(const std::function<SharedStart()>&) const { return *given; }
+};
+
+}  // namespace
+
+// Replicas of one design compute its start once (over MPI: rank 0) and hand it to the
+// others; a replica handed the start must design exactly what the one that made it
+// designs, whatever initial surface it was given, and the plain design is unchanged.
+TEST_CASE("replicas share the start: made once, and a replica handed it designs the same bits") {
+    SmallCase c = small_case();
+    c.scene.target = TargetSpec{};  // a transport start, fitted again on the 9² first level
+    const DesignResult plain = run(c, c.options);
+    REQUIRE(plain.start.used == "transport");
+
+    StartMaker maker;
+    const DesignResult made = design(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, c.options,
+                                     never_stop(), default_penalties(c.options), maker);
+    CHECK(maker.calls == 1);
+    CHECK(maker.made.transport);
+    CHECK(maker.made.skip == 0);
+    CHECK(maker.made.surface.nx() == 9);
+    check_identical(plain, made);
+
+    Heightmap tilted = surface_for(c.scene, SmallCase::mesh);
+    shape(tilted, [](double u, double) { return 0.01 * u; });
+    StartTaker taker;
+    taker.given = &maker.made;
+    const DesignResult taken = design(c.scene, std::move(tilted), c.target, c.options, never_stop(),
+                                      default_penalties(c.options), taker);
+    check_identical(plain, taken);
+    CHECK(taken.start.plan == plain.start.plan);
+    CHECK(same_bits(taken.start.error, plain.start.error));
+    CHECK(taken.start.levels_used == plain.start.levels_used);
 }
 
 // With max_iterations below the plan's budget, every level still gets its share (the

@@ -456,6 +456,10 @@ int run_design(const DesignArgs& a) {
     std::int64_t iterations_all = 0;
 #endif
     if (a.start_only) {
+#if defined(FREEFORM_WITH_MPI)
+        // Rank 0 alone writes it: the others would only compute the same start.
+        if (world_rank != 0) return 0;
+#endif
         // The start alone (the transport surface, or whatever the scene starts from).
         const auto t0 = std::chrono::steady_clock::now();
         DesignStart start = make_design_start(scene, std::move(initial), target, options.seed,

@@ -175,6 +175,39 @@ inline int coarse_levels_to_skip(double start_error, int planned) {
     return 0;
 }
 
+// The start of a design with the schedule `levels` (planned, before any is skipped):
+// the start itself (the transport start is solved and judged here), which of the
+// planned levels it still needs, and, for a transport start, the surface fitted again
+// on the first kept level's own mesh (not resampled). Replicas of one design compute
+// this once and share it (replicas.hpp, share_start).
+inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
+                                 const DesignOptions& options, const std::vector<LevelPlan>& levels, int threads) {
+    DesignStart start = make_design_start(scene, std::move(initial), target_image, options.seed, threads);
+    SharedStart shared;
+    shared.report = start.report;
+    shared.transport = start.map.has_value();
+    const int planned_count = int(levels.size());
+    if (options.start_level >= 0) {
+        shared.skip = std::min(options.start_level, planned_count - 1);
+        shared.report.plan = "optimise.start_level = " + std::to_string(options.start_level);
+    } else if (start.map && options.levels.empty()) {
+        shared.skip = coarse_levels_to_skip(start.report.error, planned_count);
+        shared.report.plan = "start error " + std::to_string(start.report.error) + ": " +
+                             (shared.skip == 0 ? std::string("all planned levels run")
+                                               : "the " + std::to_string(shared.skip) + " coarsest of " +
+                                                     std::to_string(planned_count) + " planned levels skipped");
+    } else {
+        shared.report.plan = "all planned levels run";
+    }
+    shared.surface = std::move(start.surface);
+    const LevelPlan& first = levels[std::size_t(shared.skip)];
+    if (start.map && (first.mesh_x != shared.surface.nx() || first.mesh_y != shared.surface.ny())) {
+        TransportReport fit = start.report.transport;
+        shared.surface = surface_from_transport(scene, *start.map, first.mesh_x, first.mesh_y, fit);
+    }
+    return shared;
+}
+
 // The penalty terms the options ask for; add terms of your own to it and pass it to
 // design() (objective/penalty.hpp: any type modelling LocalHeightTerm).
 inline Penalties default_penalties(const DesignOptions& o) {
@@ -272,28 +305,16 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     const int threads = thread_count(exec::omp_t{options.threads});
     DesignResult result;
 
-    // Where to start (the transport start is solved and judged here), and which of the
-    // planned levels that start still needs.
-    DesignStart start = make_design_start(scene, std::move(initial), target_image, options.seed, threads);
-    result.start = start.report;
+    // Where to start and which of the planned levels that start still needs, computed
+    // once: with replicas, one computes it and hands it to the others (replicas.hpp).
     const int planned_count = int(levels.size());
-    int skip = 0;
-    if (options.start_level >= 0) {
-        skip = std::min(options.start_level, planned_count - 1);
-        result.start.plan = "optimise.start_level = " + std::to_string(options.start_level);
-    } else if (start.map && options.levels.empty()) {
-        skip = coarse_levels_to_skip(start.report.error, planned_count);
-        result.start.plan = "start error " + std::to_string(start.report.error) + ": " +
-                            (skip == 0 ? std::string("all planned levels run")
-                                       : "the " + std::to_string(skip) + " coarsest of " +
-                                             std::to_string(planned_count) + " planned levels skipped");
-    } else {
-        result.start.plan = "all planned levels run";
-    }
-    if (skip > 0) {
+    SharedStart start = replicas.share_start(
+        [&] { return prepare_start(scene, std::move(initial), target_image, options, levels, threads); });
+    result.start = start.report;
+    if (start.skip > 0) {
         // The schedule goes on as planned from the first level kept (its kernels too:
         // the large ones of the coarse levels would only re-shape what the start has).
-        levels.erase(levels.begin(), levels.begin() + skip);
+        levels.erase(levels.begin(), levels.begin() + start.skip);
         assign_time_shares(levels);
     }
     for (std::size_t k = 0; k < levels.size(); ++k)
@@ -305,17 +326,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     // refine_max_shift_cells and start colder (refine_initial_acceptance), so that its
     // first, hottest iterations do not undo the layout the start already has.
     DesignOptions moves = options;
-    if (start.map) {
+    if (start.transport) {
         moves.max_shift_cells = std::min(options.max_shift_cells, options.refine_max_shift_cells);
         moves.min_shift_cells = std::min(options.min_shift_cells, moves.max_shift_cells);
         moves.initial_acceptance = std::min(options.initial_acceptance, options.refine_initial_acceptance);
     }
     Heightmap surface = std::move(start.surface);
-    // A transport start is fitted again on the first level's own mesh (not resampled).
-    if (start.map && (levels.front().mesh_x != surface.nx() || levels.front().mesh_y != surface.ny())) {
-        TransportReport fit = start.report.transport;
-        surface = surface_from_transport(scene, *start.map, levels.front().mesh_x, levels.front().mesh_y, fit);
-    }
     std::int64_t total_iterations = 0;
     double share_used = 0;
     bool stop = false;

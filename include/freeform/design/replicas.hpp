@@ -9,6 +9,13 @@
 // A coordinator provides:
 //   bool active() const                 false: a single design (no exchange points; the
 //                                       calls below then leave every value as it is)
+//   SharedStart share_start(const std::function<SharedStart()>& make)
+//                                       the design's start (start.hpp), the same on every
+//                                       replica: calls make() on one replica and hands
+//                                       the result to the others, so that the start (a
+//                                       transport solve: seconds on a photograph) is
+//                                       computed once per design, not once per replica;
+//                                       an exception from make() is raised on every replica
 //   std::uint64_t anneal_seed(std::uint64_t stage_seed)
 //                                       the seed of a stage's annealing run on this replica
 //                                       (stage_seed itself on replica 0; the rays, the start
@@ -33,6 +40,9 @@
 // needs.
 #include <concepts>
 #include <cstdint>
+#include <functional>
+
+#include "start.hpp"
 
 namespace freeform {
 
@@ -47,6 +57,7 @@ struct ReplicaExchange {
 // The plain design: one replica, nothing exchanged.
 struct SingleReplica {
     bool active() const { return false; }
+    SharedStart share_start(const std::function<SharedStart()>& make) const { return make(); }
     std::uint64_t anneal_seed(std::uint64_t stage_seed) const { return stage_seed; }
     double stage_temperature_scale() const { return 1.0; }
     std::int64_t exchange_every() const { return 0; }
@@ -58,8 +69,9 @@ struct SingleReplica {
 
 template <class C>
 concept ReplicaCoordinator = requires(C& c, const C& cc, std::uint64_t seed, double t, std::int64_t b, bool f,
-                                      ReplicaExchange& x) {
+                                      ReplicaExchange& x, const std::function<SharedStart()>& make) {
     { cc.active() } -> std::convertible_to<bool>;
+    { c.share_start(make) } -> std::same_as<SharedStart>;
     { c.anneal_seed(seed) } -> std::convertible_to<std::uint64_t>;
     { c.stage_temperature_scale() } -> std::convertible_to<double>;
     { cc.exchange_every() } -> std::convertible_to<std::int64_t>;

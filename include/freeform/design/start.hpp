@@ -68,6 +68,18 @@ struct DesignStart {
     StartReport report;
 };
 
+// The start as the designer uses it, once the schedule has judged it: the surface on
+// the mesh of the first level that runs, the report (with the schedule's plan) and how
+// many coarse planned levels the start makes unnecessary. It is what replicas of one
+// design share (replicas.hpp: one replica computes it, the others receive it), so it
+// holds values only, no transport map.
+struct SharedStart {
+    Heightmap surface;       // on the first level's mesh
+    StartReport report;      // plan filled in; levels_planned and levels_used are not
+    bool transport = false;  // the surface was fitted to a transport map (the annealer refines)
+    int skip = 0;            // coarse planned levels skipped
+};
+
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      std::uint64_t seed, int threads) {
     using clock = std::chrono::steady_clock;

@@ -40,6 +40,12 @@
 // this is the swap of the two rungs' scales. Rungs are tracked as labels for the report
 // and a new stage starts every rank at the scale of the rung it holds.
 //
+// The start: rank 0 alone computes the design's start (the transport solve and the
+// schedule's judgement of it, design/start.hpp) and broadcasts it (share_start); the
+// other ranks wait without spinning, so rank 0 has the cores they share. Every rank
+// thus starts from the same surface bit for bit, and the start costs one solve per run,
+// not one per rank.
+//
 // The result: each replica ends every stage holding its best state; at the end the
 // replica with the lowest objective (ties: the lowest rank) wins and its result is sent
 // to rank 0 (gather_best). With one rank all of this reduces to the plain design, bit
@@ -53,12 +59,16 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <exception>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <type_traits>
 #include <vector>
 
@@ -158,7 +168,8 @@ private:
 };
 
 // What rank 0 needs of another rank's result. The start report and the target are the
-// same on every rank (the start and the rays use the common seed) and are not sent.
+// same on every rank (rank 0 made the start; the rays use the common seed) and are not
+// sent.
 inline std::vector<char> pack_result(const DesignResult& r) {
     Packer p;
     p.put(r.surface.nx());
@@ -223,6 +234,75 @@ inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
     r.rays = u.get<std::int64_t>();
 }
 
+// The start every replica of a design uses (design/start.hpp), sent by the rank that
+// computed it. The surface goes as its placement and heights; the receiver rebuilds it
+// (the normals follow from the heights, as everywhere: Heightmap::set_heights).
+inline void pack_transport_report(Packer& p, const TransportReport& t) {
+    p.put(t.used);
+    p.put_string(t.fallback_reason);
+    p.put(t.grid_x), p.put(t.grid_y), p.put(t.cell_size), p.put(t.ot_iterations), p.put(t.ot_residual);
+    p.put(t.ot_seconds), p.put(t.fit_seconds), p.put(t.fit_iterations), p.put(t.height_range);
+    p.put(t.height_excess), p.put(t.unmapped_fraction);
+}
+
+inline void unpack_transport_report(Unpacker& u, TransportReport& t) {
+    t.used = u.get<bool>();
+    t.fallback_reason = u.get_string();
+    t.grid_x = u.get<int>(), t.grid_y = u.get<int>(), t.cell_size = u.get<double>();
+    t.ot_iterations = u.get<int>(), t.ot_residual = u.get<double>();
+    t.ot_seconds = u.get<double>(), t.fit_seconds = u.get<double>(), t.fit_iterations = u.get<int>();
+    t.height_range = u.get<double>(), t.height_excess = u.get<double>(), t.unmapped_fraction = u.get<double>();
+}
+
+inline void pack_start(Packer& p, const SharedStart& s) {
+    const Heightmap& h = s.surface;
+    p.put(h.nx()), p.put(h.ny()), p.put(h.size()), p.put(h.h_min()), p.put(h.h_max()), p.put(h.frame());
+    p.put(h.aperture());
+    p.put_vector(h.heights());
+    const StartReport& r = s.report;
+    p.put_string(r.requested), p.put_string(r.used), p.put_string(r.fallback_reason);
+    pack_transport_report(p, r.transport);
+    p.put(r.error), p.put(r.energy), p.put(r.flat_error), p.put(r.seconds);
+    p.put(r.levels_planned), p.put(r.levels_used);
+    p.put_string(r.plan);
+    p.put(s.transport), p.put(s.skip);
+}
+
+inline SharedStart unpack_start(Unpacker& u) {
+    SharedStart s;
+    const int nx = u.get<int>(), ny = u.get<int>();
+    const Vec2d size = u.get<Vec2d>();
+    const float h_min = u.get<float>(), h_max = u.get<float>();
+    const Frame frame = u.get<Frame>();
+    const Aperture aperture = u.get<Aperture>();
+    s.surface = Heightmap(nx, ny, size, h_min, h_max, frame, aperture);
+    s.surface.set_heights(u.get_vector<float>());
+    StartReport& r = s.report;
+    r.requested = u.get_string(), r.used = u.get_string(), r.fallback_reason = u.get_string();
+    unpack_transport_report(u, r.transport);
+    r.error = u.get<double>(), r.energy = u.get<double>(), r.flat_error = u.get<double>();
+    r.seconds = u.get<double>();
+    r.levels_planned = u.get<int>(), r.levels_used = u.get<int>();
+    r.plan = u.get_string();
+    s.transport = u.get<bool>();
+    s.skip = u.get<int>();
+    return s;
+}
+
+// Completes `request` without spinning on a core: a rank that waits here (for rank 0's
+// start) leaves the cores it shares to the ranks that work. Blocking MPI calls poll,
+// which on a machine with more threads than cores slows the one rank that computes.
+inline void wait_idle(MPI_Request& request) {
+    for (int done = 0;;) {
+        check(MPI_Test(&request, &done, MPI_STATUS_IGNORE), "MPI_Test");
+        if (done) return;
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+}
+
+// What rank 0 broadcasts with the start: the start, or the error that made it fail.
+enum class StartStatus : std::uint8_t { ok = 0, input_error = 1, other_error = 2 };
+
 }  // namespace detail
 
 // The coordinator of design() (design/replicas.hpp) for one replica per rank of `comm`.
@@ -251,6 +331,44 @@ public:
 
     // --- the coordinator interface (design/replicas.hpp)
     bool active() const { return true; }
+    // Rank 0 computes the start; the others wait idle (wait_idle) and receive it. An
+    // exception on rank 0 is sent too and raised on every rank (an InputError as an
+    // InputError: every rank then reports the same input error, as when each read it).
+    SharedStart share_start(const std::function<SharedStart()>& make) const {
+        if (size_ == 1) return make();
+        detail::Packer p;
+        SharedStart start;
+        std::exception_ptr failure;
+        if (rank_ == 0) {
+            try {
+                start = make();
+                p.put(detail::StartStatus::ok);
+                detail::pack_start(p, start);
+            } catch (const InputError& e) {
+                failure = std::current_exception();
+                p.put(detail::StartStatus::input_error), p.put_string(e.what());
+            } catch (const std::exception& e) {
+                failure = std::current_exception();
+                p.put(detail::StartStatus::other_error), p.put_string(e.what());
+            }
+        }
+        std::uint64_t n = p.bytes.size();
+        MPI_Request request;
+        detail::check(MPI_Ibcast(&n, 1, MPI_UINT64_T, 0, comm_, &request), "MPI_Ibcast");
+        detail::wait_idle(request);
+        p.bytes.resize(std::size_t(n));
+        detail::check(MPI_Bcast(p.bytes.data(), int(n), MPI_BYTE, 0, comm_), "MPI_Bcast");
+        if (rank_ == 0) {
+            if (failure) std::rethrow_exception(failure);
+            return start;
+        }
+        detail::Unpacker u(p.bytes);
+        const auto status = u.get<detail::StartStatus>();
+        if (status == detail::StartStatus::ok) return detail::unpack_start(u);
+        const std::string what = u.get_string();
+        if (status == detail::StartStatus::input_error) throw InputError(what);
+        throw std::runtime_error("rank 0 could not make the start: " + what);
+    }
     std::uint64_t anneal_seed(std::uint64_t stage_seed) const {
         return rank_ == 0 ? stage_seed : hash_combine(stage_seed, detail::replica_stream + std::uint64_t(rank_));
     }
