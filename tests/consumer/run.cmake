@@ -5,7 +5,9 @@
 #
 # Inputs (-D): FREEFORM_BUILD_DIR, FREEFORM_CONSUMER_SOURCE_DIR, FREEFORM_CONSUMER_WORK_DIR,
 # FREEFORM_CONFIG, FREEFORM_GENERATOR, FREEFORM_MAKE_PROGRAM, FREEFORM_CXX_COMPILER,
-# FREEFORM_EXPECT_EMBREE, FREEFORM_WERROR (the consumer's warnings are errors, as the build's).
+# FREEFORM_EXPECT_EMBREE, FREEFORM_WERROR (the consumer's warnings are errors, as the build's),
+# FREEFORM_EXPECT_MPI and FREEFORM_MPIEXEC (freeform was built with MPI: the package must
+# give freeform::mpi, and a program using it runs under `mpiexec -np 2`).
 cmake_minimum_required(VERSION 3.25)
 
 foreach(var IN ITEMS FREEFORM_BUILD_DIR FREEFORM_CONSUMER_SOURCE_DIR FREEFORM_CONSUMER_WORK_DIR FREEFORM_GENERATOR)
@@ -39,6 +41,9 @@ foreach(f IN ITEMS include/freeform/trace/heightfield.hpp share/cmake/freeform/f
     message(FATAL_ERROR "consumer test: the install is missing ${f}")
   endif()
 endforeach()
+if(FREEFORM_EXPECT_MPI AND NOT EXISTS "${prefix}/share/cmake/freeform/freeformMpiTargets.cmake")
+  message(FATAL_ERROR "consumer test: freeform was built with MPI but the install has no freeformMpiTargets.cmake")
+endif()
 
 set(configure_args
   -S "${FREEFORM_CONSUMER_SOURCE_DIR}" -B "${build}"
@@ -47,6 +52,7 @@ set(configure_args
   "-DCMAKE_PREFIX_PATH=${prefix}"
   "-DFREEFORM_EXPECTED_PREFIX=${prefix}"
   "-DFREEFORM_EXPECT_EMBREE=${FREEFORM_EXPECT_EMBREE}"
+  "-DFREEFORM_EXPECT_MPI=${FREEFORM_EXPECT_MPI}"
   "-DFREEFORM_CONSUMER_WERROR=${FREEFORM_WERROR}"
   # Only the fresh prefix may provide freeform: no package registries.
   -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF
@@ -60,4 +66,10 @@ endif()
 run_step("configure" "${CMAKE_COMMAND}" ${configure_args})
 run_step("build" "${CMAKE_COMMAND}" --build "${build}" --config Release)
 run_step("run" "${build}/bin/freeform_consumer")
+if(FREEFORM_EXPECT_MPI)
+  # As root (CI containers), more ranks than cores, no cross-memory attach (containers).
+  set(ENV{OMPI_MCA_btl_vader_single_copy_mechanism} none)
+  run_step("run under MPI" "${FREEFORM_MPIEXEC}" --allow-run-as-root --oversubscribe -np 2
+           "${build}/bin/freeform_consumer_mpi")
+endif()
 message(STATUS "consumer test: passed")
