@@ -47,6 +47,9 @@
 #include <cstdlib>
 
 #include <freeform/mpi/replica_exchange.hpp>
+#if defined(__linux__)
+#include <sched.h>
+#endif
 #endif
 #if defined(FREEFORM_WITH_EMBREE)
 #include <freeform/design/exported.hpp>
@@ -135,6 +138,12 @@ TracerChoice parse_tracer(const std::string& s) {
 
 constexpr bool embree_built =
 #if defined(FREEFORM_WITH_EMBREE)
+    true;
+#else
+    false;
+#endif
+constexpr bool mpi_built =
+#if defined(FREEFORM_WITH_MPI)
     true;
 #else
     false;
@@ -410,6 +419,47 @@ bool abort_requested_here() {
     const char* v = std::getenv("FREEFORM_TEST_ABORT_RANK");
     return v && *v && std::atoi(v) == world_rank;
 }
+
+// Cores this process may run on: its affinity mask, which mpirun sets when it binds
+// ranks (Open MPI binds each rank to one core when there are at most 2 ranks, to a
+// socket beyond, and not at all when oversubscribed). 0 where it cannot be read.
+int cores_available() {
+#if defined(__linux__)
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    if (sched_getaffinity(0, sizeof set, &set) == 0) return CPU_COUNT(&set);
+#endif
+    return 0;
+}
+
+// Ranks x threads: the threads each rank runs (--threads; 0 = the cores it is bound to)
+// and the cores it may use, gathered on rank 0, which warns when a rank has more threads
+// than cores (they would take turns on its cores, slower than fewer threads).
+struct RankLayout {
+    std::vector<int> threads, cores;
+};
+
+RankLayout rank_layout(int threads) {
+    const int mine[2] = {threads, cores_available()};
+    std::vector<int> all(std::size_t(2 * world_size), 0);
+    mpi::detail::check(MPI_Gather(mine, 2, MPI_INT, all.data(), 2, MPI_INT, 0, MPI_COMM_WORLD), "MPI_Gather");
+    RankLayout l;
+    for (int r = 0; r < world_size; ++r) {
+        l.threads.push_back(all[std::size_t(2 * r)]);
+        l.cores.push_back(all[std::size_t(2 * r + 1)]);
+    }
+    if (world_rank != 0) return l;
+    for (int r = 0; r < world_size; ++r)
+        if (l.cores[std::size_t(r)] > 0 && l.threads[std::size_t(r)] > l.cores[std::size_t(r)]) {
+            std::fprintf(stderr,
+                         "freeform: warning: rank %d runs %d threads on the %d core(s) mpirun bound it to; give each "
+                         "rank its cores (mpirun --map-by slot:PE=%d, or --bind-to none) or use --threads %d\n",
+                         r, l.threads[std::size_t(r)], l.cores[std::size_t(r)], l.threads[std::size_t(r)],
+                         l.cores[std::size_t(r)]);
+            break;
+        }
+    return l;
+}
 #endif
 
 int run_design(const DesignArgs& a) {
@@ -450,6 +500,7 @@ int run_design(const DesignArgs& a) {
     replica_options.exchange_every = a.exchange_every;
     mpi::validate(replica_options);
     mpi::Replicas replicas(MPI_COMM_WORLD, options.seed, replica_options);
+    const RankLayout layout = rank_layout(thread_count(exec::omp_t{options.threads}));
     const bool abort_here = abort_requested_here();
     int winner = 0;
     std::vector<double> replica_objectives;
@@ -565,6 +616,8 @@ int run_design(const DesignArgs& a) {
         r["final_rungs"] = replicas.rungs();
         r["objectives"] = replica_objectives;
         r["iterations_all_ranks"] = iterations_all;
+        r["threads_per_rank"] = layout.threads;
+        r["cores_per_rank"] = layout.cores;  // cores each rank was bound to (0: unknown)
         r["seeds"] = "rank 0: the seed's own streams; rank r: hash(stage seed, r)";
         m["replicas"] = r;
     }
@@ -683,7 +736,11 @@ int cli_main(int argc, char** argv) {
     design_cmd->add_option("--seed", da.seed, "random seed (default: the scene's optimise.seed)")
         ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
     design_cmd->add_option("--time-budget", da.time_budget, "seconds (default: the scene's optimise.time_budget)");
-    design_cmd->add_option("--threads", da.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
+    design_cmd->add_option("--threads", da.threads,
+                           mpi_built
+                               ? "worker threads per rank (0 = the cores mpirun bound the rank to)"
+                               : "worker threads (0 = all cores)")
+        ->check(CLI::Range(0, 65536));
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
     design_cmd->add_flag("--start-only", da.start_only,
                          "write the start surface alone (the transport surface by default), without annealing");

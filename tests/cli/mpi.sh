@@ -4,7 +4,10 @@
 # 1. `mpirun -np 1 freeform_mpi design` == `freeform design`, bit for bit (surface files)
 # 2. two `mpirun -np 2` runs with the same seed write identical surface files
 # 3. metrics.json has the replica fields (ranks, exchanges per pair, winner)
-# 4. a rank that dies ends the run non-zero, with no metrics.json or surface files
+# 4. ranks x threads: 2 ranks x 2 threads write what 2 ranks x 1 thread write, and
+#    metrics.json records each rank's threads and cores; rank 0 warns exactly when a
+#    rank has more threads than the cores mpirun bound it to
+# 5. a rank that dies ends the run non-zero, with no metrics.json or surface files
 set -uo pipefail
 freeform=$1 freeform_mpi=$2 mpiexec=$3 scene=$4 work=$5
 # Root in CI containers, and more ranks than cores on small machines.
@@ -52,6 +55,38 @@ assert r["iterations_all_ranks"] == 4000, r
 print("ok   metrics.json: ranks 2, %d exchanges proposed, %d accepted, winner rank %d"
       % (p["proposed"], p["accepted"], r["winner_rank"]))
 PY
+
+# Hybrid: unbound (--bind-to none: each rank may use every core), then mpirun's default
+# binding (one core per rank for 2 ranks on a machine with 2 or more cores).
+before=$failures
+"${mpirun[@]}" --bind-to none -np 2 "$freeform_mpi" design "$scene" --out np2t2 --threads 2 --quiet \
+    --exchange-every 100 >np2t2.log 2>&1 || fail "mpirun -np 2 --threads 2 (unbound): $(cat np2t2.log)"
+"${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out np2t2bound --threads 2 --quiet \
+    --exchange-every 100 >np2t2bound.log 2>&1 || fail "mpirun -np 2 --threads 2 (bound): $(cat np2t2bound.log)"
+for d in np2t2 np2t2bound; do
+    for f in "${files[@]}"; do
+        cmp -s "np2a/$f" "$d/$f" || fail "$d: $f differs from 2 ranks x 1 thread"
+    done
+done
+python3 - np2t2 np2t2bound np2a <<'PY' || fail "ranks x threads: metrics.json or the warning"
+import json, os, sys
+cores_here = len(os.sched_getaffinity(0))
+for d in sys.argv[1:]:
+    r = json.load(open(d + "/metrics.json"))["replicas"]
+    threads = 1 if d == "np2a" else 2
+    assert r["threads_per_rank"] == [threads, threads], (d, r["threads_per_rank"])
+    cores = r["cores_per_rank"]
+    assert len(cores) == 2 and all(1 <= c <= cores_here for c in cores), (d, cores)
+    if d == "np2t2":
+        assert cores == [cores_here, cores_here], (d, cores, cores_here)
+    over = any(t > c for t, c in zip(r["threads_per_rank"], cores))
+    warned = "warning: rank" in open(d + ".log").read()
+    assert over == warned, (d, "threads over cores" if over else "threads within cores",
+                            "warned" if warned else "no warning")
+    print("ok   %s: %d ranks x %s threads on %s cores%s" % (d, len(cores), r["threads_per_rank"], cores,
+                                                        ", warned" if warned else ""))
+PY
+[ $failures -eq $before ] && echo "ok   2 ranks x 2 threads (bound and unbound) == 2 ranks x 1 thread, bit for bit"
 
 FREEFORM_TEST_ABORT_RANK=1 "${mpirun[@]}" -x FREEFORM_TEST_ABORT_RANK -np 2 "$freeform_mpi" design "$scene" \
     --out dead --threads 1 --quiet >dead.log 2>&1
