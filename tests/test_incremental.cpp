@@ -89,13 +89,28 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         IncrementalTrace inc(hm, rays, pp);
         Histogram hist = inc.rebuild(exec::seq);
         HeightOverlay o;
-        TraceChange change;
+        TraceChange change, split;
+        TaskPool pool(3);
         CounterRng rng(99, 0);
-        int accepted = 0;
+        int accepted = 0, split_moves = 0, split_differ = 0;
         std::int64_t moved = 0, culled = 0, listed = 0;
         for (int it = 0; it < 2500; ++it) {
             random_bump(hm, rng, o);
             inc.evaluate(o, change);
+            if (it % 4 == 0) {
+                // The same move retraced by three threads, each a range of its rays: the
+                // same change bit for bit.
+                inc.evaluate(o, split, &pool);
+                split_moves += packet::use_packets(pp) && change.rays.size() >= 2 * IncrementalTrace::min_rays_per_thread;
+                bool same = split.rays == change.rays && split.records == change.records &&
+                            split.cell_begin == change.cell_begin && split.status_delta == change.status_delta &&
+                            split.rays_moved == change.rays_moved && split.rays_culled == change.rays_culled &&
+                            split.histogram.value == change.histogram.value && split.cells.size() == change.cells.size();
+                for (std::size_t k = 0; same && k < split.cells.size(); ++k)
+                    same = split.cells[k].cell == change.cells[k].cell && split.cells[k].zlo == change.cells[k].zlo &&
+                           split.cells[k].zhi == change.cells[k].zhi;
+                split_differ += same ? 0 : 1;
+            }
             culled += change.rays_culled;
             listed += change.rays_culled + std::int64_t(change.rays.size());
             if (rng.uniform() < 0.4) {
@@ -112,6 +127,8 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
                 moved += change.rays_moved;
             }
         }
+        CHECK(split_differ == 0);
+        if (packet::use_packets(pp)) CHECK(split_moves > 50);  // the split really ran
         CHECK(accepted > 800);
         CHECK(moved > 1000);  // the moves really moved light
         const Traced full = trace_scene(c.scene, hm, rays);

@@ -72,13 +72,13 @@ struct Bench {
 
 // Anneals at a fixed temperature (no cooling) for a fixed number of iterations.
 template <class Problem>
-void run_annealer(benchmark::State& state, Problem& problem, int speculative, std::int64_t iterations) {
+void run_annealer(benchmark::State& state, Problem& problem, int speculative, int threads, std::int64_t iterations) {
     AnnealOptions o;
     o.seed = 3;
     o.cooling = 1.0;  // hold the temperature: a steady acceptance rate
     o.max_iterations = iterations;
     o.speculative = speculative;
-    o.threads = speculative;
+    o.threads = threads;
     o.adaptive_speculation = false;
     // Temperature: the mean uphill delta of a few trial moves.
     typename Problem::Move m;
@@ -124,12 +124,12 @@ double rays_per_move(Problem& problem) {
 
 void incremental(benchmark::State& state) {
     const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
-    const int speculative = int(state.range(3));
+    const int speculative = int(state.range(3)), threads = int(state.range(4));
     Bench b(mesh, resolution);
     ReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
                              make_bandit("uniform", 7), b.unit(), 1.0);
     const double rays = rays_per_move(problem);
-    run_annealer(state, problem, speculative, 2000);
+    run_annealer(state, problem, speculative, threads, 2000);
     state.counters["rays_per_move"] = rays;
     state.counters["rays"] = double(b.rays.size());
 }
@@ -190,7 +190,7 @@ void embree_incremental(benchmark::State& state) {
     EmbreeReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
                                    make_bandit("uniform", 7), b.unit(), 1.0, EmbreeBackend{&tracer, &b.surface});
     const double rays = rays_per_move(problem);
-    run_annealer(state, problem, 1, 300);
+    run_annealer(state, problem, 1, 1, 300);
     state.counters["rays_per_move"] = rays;
 }
 
@@ -210,27 +210,30 @@ void embree_refit(benchmark::State& state) {
 }
 #endif
 
-void sizes(benchmark::internal::Benchmark* b, bool speculative) {
+// Rows: one thread; two threads judging one proposal at a time, its rays split between
+// them (split); two threads judging windows of two proposals (speculative).
+void sizes(benchmark::internal::Benchmark* b, bool parallel) {
     for (int resolution : {100, 200})
         for (int mesh : {51, 101, 201, 401}) {
-            b->Args({mesh, resolution, 5, 1});
-            if (speculative) b->Args({mesh, resolution, 5, 2});
+            b->Args({mesh, resolution, 5, 1, 1});
+            if (parallel) b->Args({mesh, resolution, 5, 1, 2});
+            if (parallel) b->Args({mesh, resolution, 5, 2, 2});
         }
     // The cost of a move follows the kernel's footprint, not the mesh.
-    for (int support : {3, 9, 17}) b->Args({101, 100, support, 1});
+    for (int support : {3, 9, 17}) b->Args({101, 100, support, 1, 1});
 }
 
 }  // namespace
 
 BENCHMARK(incremental)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, true); })
-    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(full_retrace)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, false); })
-    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
     ->Iterations(10)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
@@ -239,13 +242,13 @@ BENCHMARK(full_retrace)
 // refitted for each), so there are no speculative rows.
 BENCHMARK(embree_incremental)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, false); })
-    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(embree_full_retrace)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, false); })
-    ->ArgNames({"mesh", "receiver", "kernel", "speculative"})
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
     ->Iterations(5)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();

@@ -537,6 +537,14 @@ private:
     void evaluate(int count) {
         const Problem& cp = problem_;
         proposals_evaluated_ += count;
+        if (count == 1 && options_.threads != 1) {
+            // One proposal: a problem that can split its evaluation over threads gets them.
+            if constexpr (requires(typename Problem::Move& m, TaskPool* pool) { cp.delta(m, pool); }) {
+                if (!pool_) pool_ = std::make_unique<TaskPool>(thread_count(exec::omp_t{options_.threads}));
+                deltas_[0] = static_cast<double>(cp.delta(moves_[0], pool_.get()));
+                return;
+            }
+        }
         if (count == 1 || options_.threads == 1) {
             for (int k = 0; k < count; ++k) deltas_[k] = static_cast<double>(cp.delta(moves_[k]));
             return;

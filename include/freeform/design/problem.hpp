@@ -42,8 +42,9 @@ struct HeightfieldBackend {
     static constexpr bool concurrent_deltas = true;
     static constexpr const char* name = "heightfield";
     Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
-    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change) const {
-        trace.evaluate(o, change);
+    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change,
+                  TaskPool* pool = nullptr) const {
+        trace.evaluate(o, change, pool);
     }
     void committed(const Patch&) {}
 };
@@ -54,8 +55,9 @@ struct FullRetraceBackend {
     static constexpr bool concurrent_deltas = true;
     static constexpr const char* name = "full";
     Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
-    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change) const {
-        trace.evaluate_all(o, change);
+    void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change,
+                  TaskPool* pool = nullptr) const {
+        trace.evaluate_all(o, change, pool);
     }
     void committed(const Patch&) {}
 };
@@ -131,13 +133,21 @@ public:
         m.noop = m.overlay.empty();
     }
 
-    double delta(Move& m) const {
+    double delta(Move& m) const { return delta(m, nullptr); }
+
+    // delta() with the threads of `pool` retracing the move's rays together, where the
+    // backend can (the result is the same bit for bit); the annealer passes its pool
+    // when it judges one proposal at a time.
+    double delta(Move& m, TaskPool* pool) const {
         if (m.noop) {
             m.sums = image_.sums();
             m.penalty_sum = penalty_sum_;
             return m.delta_value = 0.0;
         }
-        backend_.evaluate(trace_, m.overlay, m.change);
+        if constexpr (requires { backend_.evaluate(trace_, m.overlay, m.change, pool); })
+            backend_.evaluate(trace_, m.overlay, m.change, pool);
+        else
+            backend_.evaluate(trace_, m.overlay, m.change);
         m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
         m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
         const ObjectiveValue after =

@@ -83,6 +83,43 @@ public:
 
     // The sums after adding `delta` to R, without changing the state.
     ImageSums evaluate(const SparseDelta& delta, ImageScratch& work) const {
+        if (delta.touched.empty()) return sums_;
+        // A move's rays land close together: when the box around the touched cells is
+        // small, sweep it (no marks, no per-cell bookkeeping); else visit the cells.
+        const int w = width(), h = height();
+        int x0 = w, x1 = -1, y0 = h, y1 = -1;
+        const double inv_w = 1.0 / w;
+        for (auto c : delta.touched) {
+            int y = int(double(c) * inv_w);  // c / w, corrected by one where rounding crossed a row
+            y -= y * w > c ? 1 : 0;
+            y += (y + 1) * w <= c ? 1 : 0;
+            const int x = c - y * w;
+            x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+        }
+        const std::int64_t box = std::int64_t(x1 - x0 + 3) * (y1 - y0 + 3);
+        if (box > 4 * std::int64_t(delta.touched.size()) + 64) return evaluate_cells(delta, work);
+        ImageSums s = sums_;
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                const std::size_t n = std::size_t(y) * w + x;
+                const Fixed dv = delta.value[n];
+                s.l1 += std::llabs(d_[n] + dv) - std::llabs(d_[n]);
+                s.on_receiver += dv;
+            }
+        // Sobel is linear: G(D + dR) = G(D) + G(dR); it changes only where G(dR) != 0,
+        // within one cell of a touched cell.
+        for (int y = std::max(y0 - 1, 0); y <= std::min(y1 + 1, h - 1); ++y)
+            for (int x = std::max(x0 - 1, 0); x <= std::min(x1 + 1, w - 1); ++x) {
+                const Gradient g = gradient(delta.value.data(), x, y);
+                if (g.x == 0 && g.y == 0) continue;
+                const Gradient f = gradient(d_.data(), x, y);
+                s.sobel += std::llabs(f.x + g.x) + std::llabs(f.y + g.y) - std::llabs(f.x) - std::llabs(f.y);
+            }
+        return s;
+    }
+
+    // evaluate() by visiting the touched cells and their neighbours (deltas spread wide).
+    ImageSums evaluate_cells(const SparseDelta& delta, ImageScratch& work) const {
         ImageSums s = sums_;
         const int w = width(), h = height();
         std::vector<std::uint8_t>& scratch = work.mark;
@@ -132,20 +169,35 @@ public:
 
     // |Gx| + |Gy| of D (+ delta) at (x, y), zero padding outside.
     std::int64_t sobel_at(int x, int y, const SparseDelta* delta) const {
-        const int w = width(), h = height();
-        auto at = [&](int i, int j) -> Fixed {
-            if (i < 0 || j < 0 || i >= w || j >= h) return 0;
-            const std::size_t n = std::size_t(j) * w + i;
-            return d_[n] + (delta ? delta->value[n] : 0);
-        };
-        const Fixed gx = (at(x + 1, y - 1) + 2 * at(x + 1, y) + at(x + 1, y + 1)) -
-                         (at(x - 1, y - 1) + 2 * at(x - 1, y) + at(x - 1, y + 1));
-        const Fixed gy = (at(x - 1, y + 1) + 2 * at(x, y + 1) + at(x + 1, y + 1)) -
-                         (at(x - 1, y - 1) + 2 * at(x, y - 1) + at(x + 1, y - 1));
-        return std::llabs(gx) + std::llabs(gy);
+        Gradient g = gradient(d_.data(), x, y);
+        if (delta) {
+            const Gradient e = gradient(delta->value.data(), x, y);
+            g.x += e.x, g.y += e.y;
+        }
+        return std::llabs(g.x) + std::llabs(g.y);
     }
 
 private:
+    struct Gradient {
+        Fixed x, y;
+    };
+    // The Sobel gradient of the width() x height() image `a` at (x, y), zero padding outside.
+    Gradient gradient(const Fixed* a, int x, int y) const {
+        const int w = width(), h = height();
+        if (x > 0 && y > 0 && x + 1 < w && y + 1 < h) {  // interior: no padding
+            const Fixed* up = a + std::size_t(y - 1) * w + x;
+            const Fixed* mid = up + w;
+            const Fixed* down = mid + w;
+            return {(up[1] + 2 * mid[1] + down[1]) - (up[-1] + 2 * mid[-1] + down[-1]),
+                    (down[-1] + 2 * down[0] + down[1]) - (up[-1] + 2 * up[0] + up[1])};
+        }
+        auto at = [&](int i, int j) -> Fixed {
+            return i < 0 || j < 0 || i >= w || j >= h ? 0 : a[std::size_t(j) * w + i];
+        };
+        return {(at(x + 1, y - 1) + 2 * at(x + 1, y) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2 * at(x - 1, y) + at(x - 1, y + 1)),
+                (at(x - 1, y + 1) + 2 * at(x, y + 1) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2 * at(x, y - 1) + at(x + 1, y - 1))};
+    }
+
     Target target_;
     std::vector<Fixed> d_;
     std::vector<std::uint8_t> mark_;

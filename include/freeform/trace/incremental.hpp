@@ -15,11 +15,13 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <span>
 #include <vector>
 
 #include "../core/exec.hpp"
+#include "../core/task_pool.hpp"
 #include "../core/histogram.hpp"
 #include "../objective/image_terms.hpp"
 #include "../surface/overlay.hpp"
@@ -41,17 +43,23 @@ class RayCellIndex {
 public:
     void reset(std::int64_t rays, std::int64_t cells) {
         pool_.clear();
-        begin_.assign(std::size_t(rays), 0);
-        count_.assign(std::size_t(rays), 0);
-        capacity_.assign(std::size_t(rays), 0);
+        slot_.assign(std::size_t(rays), Slot{});
         cell_rays_.assign(std::size_t(cells), {});
         waste_ = 0;
     }
 
     std::span<const CellCrossing> cells_of(std::int32_t ray) const {
-        return {pool_.data() + begin_[std::size_t(ray)], count_[std::size_t(ray)]};
+        const Slot& s = slot_[std::size_t(ray)];
+        return {pool_.data() + s.begin, s.count};
     }
+    // Hints that a ray's cells will be read soon: first where they are (its slot), then,
+    // once the slot has arrived, the cells themselves.
+    void prefetch_slot(std::int32_t ray) const { prefetch(slot_.data() + ray); }
+    void prefetch_cells(std::int32_t ray) const { prefetch(pool_.data() + slot_[std::size_t(ray)].begin); }
     const std::vector<std::int32_t>& rays_of(std::int32_t cell) const { return cell_rays_[std::size_t(cell)]; }
+
+    // Room for `crossings` cells in all (before a build, so the pool grows once).
+    void reserve(std::size_t crossings) { pool_.reserve(crossings + 2 * slot_.size()); }
 
     // First assignment of a ray's cells (rays added in increasing order at build time).
     void assign(std::int32_t ray, std::span<const CellCrossing> cells) {
@@ -85,41 +93,45 @@ public:
     }
 
     std::size_t memory_bytes() const {
-        std::size_t b = pool_.capacity() * sizeof(CellCrossing) + begin_.capacity() * 8 + count_.capacity() * 2 * 2;
+        std::size_t b = pool_.capacity() * sizeof(CellCrossing) + slot_.capacity() * sizeof(Slot);
         for (const auto& l : cell_rays_) b += l.capacity() * 4 + sizeof(l);
         return b;
     }
 
 private:
     void store(std::int32_t ray, std::span<const CellCrossing> cells) {
-        const auto r = std::size_t(ray);
-        if (cells.size() <= capacity_[r]) {
-            std::copy(cells.begin(), cells.end(), pool_.begin() + begin_[r]);
+        Slot& s = slot_[std::size_t(ray)];
+        if (cells.size() <= s.capacity) {
+            std::copy(cells.begin(), cells.end(), pool_.begin() + s.begin);
         } else {
-            waste_ += capacity_[r];
-            begin_[r] = std::int64_t(pool_.size());
-            capacity_[r] = std::uint16_t(std::min<std::size_t>(cells.size() + 2, 65535));
+            waste_ += s.capacity;
+            s.begin = std::int64_t(pool_.size());
+            s.capacity = std::uint16_t(std::min<std::size_t>(cells.size() + 2, 65535));
             pool_.insert(pool_.end(), cells.begin(), cells.end());
-            pool_.resize(pool_.size() + (capacity_[r] - cells.size()), CellCrossing{-1});
+            pool_.resize(pool_.size() + (s.capacity - cells.size()), CellCrossing{-1});
         }
-        count_[r] = std::uint16_t(cells.size());
+        s.count = std::uint16_t(cells.size());
         if (waste_ > std::int64_t(pool_.size() / 2) && pool_.size() > 4096) compact();
     }
     void compact() {
         std::vector<CellCrossing> fresh;
         fresh.reserve(pool_.size() - std::size_t(waste_));
-        for (std::size_t r = 0; r < begin_.size(); ++r) {
+        for (Slot& s : slot_) {
             const std::int64_t b = std::int64_t(fresh.size());
-            fresh.insert(fresh.end(), pool_.begin() + begin_[r], pool_.begin() + begin_[r] + capacity_[r]);
-            begin_[r] = b;
+            fresh.insert(fresh.end(), pool_.begin() + s.begin, pool_.begin() + s.begin + s.capacity);
+            s.begin = b;
         }
         pool_.swap(fresh);
         waste_ = 0;
     }
 
+    // Where a ray's cells lie in pool_ (one record per ray: one cache line to find them).
+    struct Slot {
+        std::int64_t begin = 0;
+        std::uint16_t count = 0, capacity = 0;
+    };
     std::vector<CellCrossing> pool_;
-    std::vector<std::int64_t> begin_;
-    std::vector<std::uint16_t> count_, capacity_;
+    std::vector<Slot> slot_;
     std::vector<std::vector<std::int32_t>> cell_rays_;
     std::int64_t waste_ = 0;
 };
@@ -230,6 +242,18 @@ struct TraceChange {
 #if !defined(__CUDACC__)
     LaneCellBuffer lane_cells;  // scratch of the packet retrace
 #endif
+    // What one thread of a split retrace produces besides the records (rays, records and
+    // cell offsets are written in place, each thread its own range): merged in order.
+    struct Part {
+        std::vector<CellCrossing> cells;
+        SparseDelta histogram;
+        std::array<Fixed, 6> status_delta{};
+        std::int64_t rays_moved = 0;
+#if !defined(__CUDACC__)
+        LaneCellBuffer lane_cells;
+#endif
+    };
+    std::vector<std::unique_ptr<Part>> parts;  // parts 1, 2, ... (part 0 is this change)
     std::uint32_t generation = 0;
 
     void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
@@ -304,6 +328,9 @@ public:
             }
             starts.push_back(std::int64_t(cells.size()));
         });
+        std::size_t crossings = 0;
+        for (const auto& cells : chunk_cells) crossings += cells.size();
+        index_.reserve(crossings);
         for (int c = 0; c < chunks; ++c) {
             const std::int64_t begin = n * c / chunks;
             const auto& cells = chunk_cells[std::size_t(c)];
@@ -355,11 +382,19 @@ public:
 
     // Retraces the rays `o` can affect against the surface with `o` applied, without
     // changing anything. Thread-safe for distinct `change` objects.
-    void evaluate(const HeightOverlay& o, TraceChange& change) const {
+    // Fewest rays worth handing to another thread (about ten microseconds of tracing;
+    // waking a sleeping worker costs a few).
+    static constexpr std::size_t min_rays_per_thread = 256;
+
+    // With a pool of several threads, a move with many rays is retraced by all of them,
+    // each a contiguous range of its rays, and their outputs are merged in order: the
+    // change is the same bit for bit (histogram values are exact integer sums). The pool
+    // must not be running a task of its own already (no nesting).
+    void evaluate(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
-            if (select_rays(o, change)) retrace_packets_into(view, change);
+            if (select_rays(o, change)) retrace_packets_into(view, change, pool);
             return;
         }
 #endif
@@ -378,14 +413,14 @@ public:
 
     // Retraces every ray against the surface with `o` applied: the reference's full
     // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
-    void evaluate_all(const HeightOverlay& o, TraceChange& change) const {
+    void evaluate_all(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
         change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         change.rays.resize(std::size_t(rays_->size()));
         for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
-            retrace_packets_into(view, change);
+            retrace_packets_into(view, change, pool);
             return;
         }
 #endif
@@ -461,20 +496,93 @@ private:
         out.insert(out.end(), lanes.cell[l], lanes.cell[l] + n);
     }
 
-    // retrace_into with the packet tracer, eight rays at a time.
+    // Where a range of a retrace puts what it finds besides records and cell offsets.
+    struct PartOut {
+        std::vector<CellCrossing>& cells;
+        SparseDelta& histogram;
+        std::array<Fixed, 6>& status_delta;
+        std::int64_t& rays_moved;
+        LaneCellBuffer& lane_cells;
+    };
+
+    // retrace_into with the packet tracer, eight rays at a time, split over the pool's
+    // threads when the move has rays enough.
     template <class View>
-    void retrace_packets_into(const View& view, TraceChange& change) const {
+    void retrace_packets_into(const View& view, TraceChange& change, TaskPool* pool = nullptr) const {
         const std::size_t n = change.rays.size();
         change.records.resize(n);
         change.cell_begin.resize(n + 1);
         const hf_detail::Grid grid = hf_detail::grid_of(view);
+        PartOut main{change.cells, change.histogram, change.status_delta, change.rays_moved, change.lane_cells};
+        const int threads = pool != nullptr ? pool->threads() : 1;
+        const int parts = int(std::min<std::size_t>(std::size_t(threads), n / min_rays_per_thread));
+        if (parts <= 1) {
+            retrace_packets_range(view, grid, change, 0, n, main);
+            change.cell_begin[n] = std::int32_t(change.cells.size());
+            return;
+        }
+        // Contiguous ranges, whole packets each, so that every ray is traced in the same
+        // packet as without the split (a lane's result does not depend on its packet
+        // anyway, tests/test_packet.cpp).
+        std::vector<std::size_t> bound(std::size_t(parts) + 1);
+        for (int p = 0; p <= parts; ++p)
+            bound[std::size_t(p)] = std::min(n, (n * std::size_t(p) / std::size_t(parts) + packet::width - 1) /
+                                                    packet::width * packet::width);
+        bound[std::size_t(parts)] = n;
+        while (change.parts.size() < std::size_t(parts - 1)) change.parts.push_back(std::make_unique<TraceChange::Part>());
+        for (int p = 1; p < parts; ++p) {
+            TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+            if (part.histogram.value.size() != change.histogram.value.size())
+                part.histogram.resize(change.histogram.value.size());
+            part.histogram.clear();
+            part.cells.clear();
+            part.status_delta.fill(0);
+            part.rays_moved = 0;
+        }
+        std::vector<std::exception_ptr> errors(static_cast<std::size_t>(parts));
+        pool->run(parts, [&](int p) {
+            try {
+                if (p == 0) {
+                    retrace_packets_range(view, grid, change, bound[0], bound[1], main);
+                } else {
+                    TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+                    PartOut out{part.cells, part.histogram, part.status_delta, part.rays_moved, part.lane_cells};
+                    retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], out);
+                }
+            } catch (...) {
+                errors[std::size_t(p)] = std::current_exception();
+            }
+        });
+        for (const auto& e : errors)
+            if (e) std::rethrow_exception(e);
+        for (int p = 1; p < parts; ++p) {
+            TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+            const auto offset = std::int32_t(change.cells.size());
+            for (std::size_t k = bound[std::size_t(p)]; k < bound[std::size_t(p) + 1]; ++k) change.cell_begin[k] += offset;
+            change.cells.insert(change.cells.end(), part.cells.begin(), part.cells.end());
+            for (auto c : part.histogram.touched) {  // a cell may be listed twice: take it once
+                Fixed& v = part.histogram.value[std::size_t(c)];
+                if (v != 0) change.histogram.add(c, v);
+                v = 0;
+            }
+            for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += part.status_delta[st];
+            change.rays_moved += part.rays_moved;
+        }
+        change.cell_begin[n] = std::int32_t(change.cells.size());
+    }
+
+    // Retraces change.rays[begin, end): records and cell offsets (relative to out.cells)
+    // in place, the rest into `out`.
+    template <class View>
+    void retrace_packets_range(const View& view, const hf_detail::Grid& grid, TraceChange& change,
+                               std::size_t begin, std::size_t end, PartOut& out) const {
         Vec3 o[packet::width], d[packet::width];
         RayRecord rec[packet::width];
-        for (std::size_t k0 = 0; k0 < n; k0 += packet::width) {
-            const int count = int(std::min<std::size_t>(packet::width, n - k0));
+        for (std::size_t k0 = begin; k0 < end; k0 += packet::width) {
+            const int count = int(std::min<std::size_t>(packet::width, end - k0));
             // The rays of a move are scattered over the ray arrays: ask for the next
             // packet's data now, so that it arrives while this packet is traced.
-            for (std::size_t k = k0 + packet::width; k < std::min(n, k0 + 2 * packet::width); ++k) {
+            for (std::size_t k = k0 + packet::width; k < std::min(end, k0 + 2 * packet::width); ++k) {
                 const auto id = std::size_t(change.rays[k]);
                 prefetch(rays_->origin.data() + id);
                 prefetch(rays_->direction.data() + id);
@@ -485,30 +593,33 @@ private:
                 const auto id = std::size_t(change.rays[k0 + std::size_t(l)]);
                 o[l] = rays_->origin[id], d[l] = rays_->direction[id];
             }
-            trace_packet(view, grid, o, d, count, rec, change.lane_cells);
+            trace_packet(view, grid, o, d, count, rec, out.lane_cells);
             for (int l = 0; l < count; ++l) {
                 const std::size_t k = k0 + std::size_t(l);
-                change.cell_begin[k] = std::int32_t(change.cells.size());
-                append_lane_cells(view, change.lane_cells, l, o[l], d[l], rec[l], change.cells);
-                account(change, k, rec[l]);
+                change.cell_begin[k] = std::int32_t(out.cells.size());
+                append_lane_cells(view, out.lane_cells, l, o[l], d[l], rec[l], out.cells);
+                change.records[k] = rec[l];
+                account(change.rays[k], rec[l], out.histogram, out.status_delta, out.rays_moved);
             }
         }
-        change.cell_begin[n] = std::int32_t(change.cells.size());
     }
 #endif
 
     // Stores the new record of change.rays[k] and, if it differs from the maintained one,
     // moves the ray's weight.
     void account(TraceChange& change, std::size_t k, const RayRecord& now) const {
-        const std::int32_t id = change.rays[k];
         change.records[k] = now;
+        account(change.rays[k], now, change.histogram, change.status_delta, change.rays_moved);
+    }
+    void account(std::int32_t id, const RayRecord& now, SparseDelta& histogram, std::array<Fixed, 6>& status_delta,
+                 std::int64_t& rays_moved) const {
         const RayRecord& before = records_[std::size_t(id)];
         if (now == before) return;
-        ++change.rays_moved;
+        ++rays_moved;
         const Fixed w = rays_->weight[std::size_t(id)];
-        change.status_delta[std::size_t(before.status)] -= w;
-        change.status_delta[std::size_t(now.status)] += w;
-        move_deposit(before, now, w, change.histogram);
+        status_delta[std::size_t(before.status)] -= w;
+        status_delta[std::size_t(now.status)] += w;
+        move_deposit(before, now, w, histogram);
     }
 
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
@@ -555,8 +666,18 @@ private:
             return false;
         };
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
-            for (int ci = cells.i0; ci <= cells.i1; ++ci)
-                for (auto id : index_.rays_of(cj * row + ci)) {
+            for (int ci = cells.i0; ci <= cells.i1; ++ci) {
+                // The listed rays' marks and cells are scattered: prefetch ahead.
+                const auto& listed = index_.rays_of(cj * row + ci);
+                constexpr std::size_t ahead = 8;
+                for (std::size_t k = 0; k < listed.size() && k < ahead; ++k) index_.prefetch_slot(listed[k]);
+                for (std::size_t k = 0; k < listed.size(); ++k) {
+                    if (k + ahead < listed.size()) {
+                        index_.prefetch_slot(listed[k + ahead]);
+                        prefetch(change.ray_mark.data() + listed[k + ahead]);
+                    }
+                    if (k + ahead / 2 < listed.size()) index_.prefetch_cells(listed[k + ahead / 2]);
+                    const std::int32_t id = listed[k];
                     auto& mark = change.ray_mark[std::size_t(id)];
                     if (mark == change.generation) continue;
                     mark = change.generation;
@@ -565,6 +686,7 @@ private:
                     else
                         ++change.rays_culled;
                 }
+            }
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
     }
@@ -572,25 +694,20 @@ private:
     // Removes a ray's old deposit and adds its new one. A ray that moves a little keeps
     // its four bilinear cells: their differences are added once instead of eight times.
     void move_deposit(const RayRecord& before, const RayRecord& now, Fixed w, SparseDelta& d) const {
-        std::int64_t cell[8];
-        Fixed amount[8];
-        int n = 0;
-        if (before.status == RayStatus::receiver)
-            deposit(params_.receiver, before.px, before.py, w, [&](std::int64_t c, Fixed a) {
-                cell[n] = c, amount[n++] = -a;
-            });
-        const int old_n = n;
-        if (now.status == RayStatus::receiver)
-            deposit(params_.receiver, now.px, now.py, w, [&](std::int64_t c, Fixed a) {
-                for (int k = 0; k < old_n; ++k)
-                    if (cell[k] == c) {
-                        amount[k] += a;
-                        return;
-                    }
-                cell[n] = c, amount[n++] = a;
-            });
-        for (int k = 0; k < n; ++k)
-            if (amount[k] != 0) d.add(cell[k], amount[k]);
+        const bool was = before.status == RayStatus::receiver, is = now.status == RayStatus::receiver;
+        const Splat a = was ? splat(params_.receiver, before.px, before.py, w) : Splat{};
+        const Splat b = is ? splat(params_.receiver, now.px, now.py, w) : Splat{};
+        if (was && is && a.cell[0] == b.cell[0] && a.cell[3] == b.cell[3]) {  // the same four cells
+            for (int k = 0; k < 4; ++k)
+                if (b.amount[k] != a.amount[k]) d.add(a.cell[k], b.amount[k] - a.amount[k]);
+            return;
+        }
+        if (was)
+            for (int k = 0; k < 4; ++k)
+                if (a.amount[k] != 0) d.add(a.cell[k], -a.amount[k]);
+        if (is)
+            for (int k = 0; k < 4; ++k)
+                if (b.amount[k] != 0) d.add(b.cell[k], b.amount[k]);
     }
 
     const Heightmap* surface_;

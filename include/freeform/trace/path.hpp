@@ -56,16 +56,25 @@ struct ReceiverView {
     }
 };
 
-// Splits a ray's weight over receiver cells. Calls add(cell_index, amount); the amounts
-// always sum to exactly `w`, so energy is conserved to the last bit.
-template <class Add>
-FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixed w, Add&& add) {
+// A ray's weight split over receiver cells: the four bilinear cells (which repeat at the
+// receiver's edges), or one cell with the whole weight and three empty shares. The
+// amounts always sum to exactly the weight, so energy is conserved to the last bit.
+struct Splat {
+    std::int64_t cell[4];
+    Fixed amount[4];
+};
+
+FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed w) {
+    Splat s;
     if (!rv.bilinear) {
         int x = int(px), y = int(py);
         x = x < rv.width ? x : rv.width - 1;
         y = y < rv.height ? y : rv.height - 1;
-        add(std::int64_t(y) * rv.width + x, w);
-        return;
+        const std::int64_t c = std::int64_t(y) * rv.width + x;
+        s.cell[0] = s.cell[1] = s.cell[2] = s.cell[3] = c;
+        s.amount[0] = w;
+        s.amount[1] = s.amount[2] = s.amount[3] = 0;
+        return s;
     }
     const float sx = px - 0.5f, sy = py - 0.5f;  // >= -0.5: floor by truncation and one compare
     int x0 = int(sx), y0 = int(sy);
@@ -81,11 +90,23 @@ FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixe
     const Fixed w11 = Fixed(wd * fx * fy);
     const Fixed w10 = Fixed(wd * fx * (1.0 - fy));
     const Fixed w01 = Fixed(wd * (1.0 - fx) * fy);
-    const Fixed w00 = w - w11 - w10 - w01;
-    add(std::int64_t(y0) * rv.width + x0, w00);
-    add(std::int64_t(y0) * rv.width + x1, w10);
-    add(std::int64_t(y1) * rv.width + x0, w01);
-    add(std::int64_t(y1) * rv.width + x1, w11);
+    s.amount[0] = w - w11 - w10 - w01;
+    s.amount[1] = w10;
+    s.amount[2] = w01;
+    s.amount[3] = w11;
+    s.cell[0] = std::int64_t(y0) * rv.width + x0;
+    s.cell[1] = std::int64_t(y0) * rv.width + x1;
+    s.cell[2] = std::int64_t(y1) * rv.width + x0;
+    s.cell[3] = std::int64_t(y1) * rv.width + x1;
+    return s;
+}
+
+// Splits a ray's weight over receiver cells: calls add(cell_index, amount) for each
+// share of splat() (an empty share too: adding 0 changes nothing).
+template <class Add>
+FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixed w, Add&& add) {
+    const Splat s = splat(rv, px, py, w);
+    for (int k = 0; k < 4; ++k) add(s.cell[k], s.amount[k]);
 }
 
 // The nearest hit of a segment on a triangle of the surface (or of an extra mesh).
