@@ -8,7 +8,8 @@
 // the spinning worker steals the time the main thread needs; a region also has to wait
 // for every worker to wake up. Here the caller works too and takes whatever indices are
 // still unclaimed, so a descheduled worker never holds it up unless it already started a
-// task; idle workers spin only briefly and then sleep on a condition variable.
+// task; idle workers spin only briefly (yielding their core) and then sleep on a
+// condition variable.
 #include <algorithm>
 #include <atomic>
 #include <condition_variable>
@@ -94,6 +95,13 @@ private:
         for (;;) {
             bool woke = false;
             for (int spin = 0; spin < 2000 && !woke; ++spin) woke = generation_.load() != seen;
+            // Runs often come back to back with a few tens of microseconds between them (one
+            // proposal's rays split over the threads, then the caller's bookkeeping): stay
+            // awake that long, but yield the core to anything else that wants it.
+            for (int spin = 0; spin < 64 && !woke; ++spin) {
+                std::this_thread::yield();
+                woke = generation_.load() != seen;
+            }
             if (!woke) {
                 std::unique_lock lock(mutex_);
                 wake_.wait(lock, [&] { return generation_.load() != seen; });
