@@ -245,6 +245,10 @@ struct TraceChange {
     // What one thread of a split retrace produces besides the records (rays, records and
     // cell offsets are written in place, each thread its own range): merged in order.
     struct Part {
+        std::vector<std::int32_t> rays;  // the rays this thread selected (ray selection)
+        std::int64_t rays_culled = 0;
+        std::vector<std::uint32_t> ray_mark;  // this thread's dedupe (generation stamps)
+        std::uint32_t generation = 0;
         std::vector<CellCrossing> cells;
         SparseDelta histogram;
         std::array<Fixed, 6> status_delta{};
@@ -394,7 +398,7 @@ public:
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
-            if (select_rays(o, change)) retrace_packets_into(view, change, pool);
+            if (select_rays(o, change, pool)) retrace_packets_into(view, change, pool);
             return;
         }
 #endif
@@ -444,14 +448,35 @@ public:
 private:
     // Starts `change` for the move `o` and lists the rays it must retrace; false (and an
     // empty change) when the move changes nothing.
-    bool select_rays(const HeightOverlay& o, TraceChange& change) const {
+    bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
         change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         if (o.empty()) {
             change.cell_begin.push_back(0);
             return false;
         }
-        collect_rays(o, affected_cells(o), change);
+        collect_rays(o, affected_cells(o), change, pool);
         return true;
+    }
+
+    // change.parts[0, count) exist (parts 1 .. count of a split).
+    static void ensure_parts(TraceChange& change, int count) {
+        while (change.parts.size() < std::size_t(count)) change.parts.push_back(std::make_unique<TraceChange::Part>());
+    }
+
+    // Runs task(p) for p in [0, parts) on the pool; the first exception (in part order) is
+    // rethrown after all have ended.
+    template <class Task>
+    static void run_parts(TaskPool& pool, int parts, Task&& task) {
+        std::vector<std::exception_ptr> errors(static_cast<std::size_t>(parts));
+        pool.run(parts, [&](int p) {
+            try {
+                task(p);
+            } catch (...) {
+                errors[std::size_t(p)] = std::current_exception();
+            }
+        });
+        for (const auto& e : errors)
+            if (e) std::rethrow_exception(e);
     }
 
     // Retraces change.rays and records what changed.
@@ -529,7 +554,7 @@ private:
             bound[std::size_t(p)] = std::min(n, (n * std::size_t(p) / std::size_t(parts) + packet::width - 1) /
                                                     packet::width * packet::width);
         bound[std::size_t(parts)] = n;
-        while (change.parts.size() < std::size_t(parts - 1)) change.parts.push_back(std::make_unique<TraceChange::Part>());
+        ensure_parts(change, parts - 1);
         for (int p = 1; p < parts; ++p) {
             TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
             if (part.histogram.value.size() != change.histogram.value.size())
@@ -539,22 +564,15 @@ private:
             part.status_delta.fill(0);
             part.rays_moved = 0;
         }
-        std::vector<std::exception_ptr> errors(static_cast<std::size_t>(parts));
-        pool->run(parts, [&](int p) {
-            try {
-                if (p == 0) {
-                    retrace_packets_range(view, grid, change, bound[0], bound[1], main);
-                } else {
-                    TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-                    PartOut out{part.cells, part.histogram, part.status_delta, part.rays_moved, part.lane_cells};
-                    retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], out);
-                }
-            } catch (...) {
-                errors[std::size_t(p)] = std::current_exception();
+        run_parts(*pool, parts, [&](int p) {
+            if (p == 0) {
+                retrace_packets_range(view, grid, change, bound[0], bound[1], main);
+            } else {
+                TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+                PartOut out{part.cells, part.histogram, part.status_delta, part.rays_moved, part.lane_cells};
+                retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], out);
             }
         });
-        for (const auto& e : errors)
-            if (e) std::rethrow_exception(e);
         for (int p = 1; p < parts; ++p) {
             TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
             const auto offset = std::int32_t(change.cells.size());
@@ -630,7 +648,12 @@ private:
     // allowance) both before and after the move: the walk's culling test then skips the
     // cell either way, so the ray's path, record and cells are what they were. This is the
     // walk's own test on the same floats, so leaving the ray out is exact.
-    void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change) const {
+    //
+    // With a pool, the move's rows of cells are shared out between its threads. Rows are
+    // scanned in order and a ray is taken at its first sighting, so a thread skips the rays
+    // that also cross a cell of an earlier thread's rows (that thread has them): the rays
+    // of thread 0, then of thread 1, ... are exactly the serial selection, in its order.
+    void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change, TaskPool* pool) const {
         const int row = surface_->nx() - 1;
         change.reach.resize(std::size_t(cells.count()));
         {
@@ -653,19 +676,73 @@ private:
         // Slot of each move cell in change.reach, looked up by cell id (no divisions).
         auto& slot = change.cell_slot;
         if (std::int64_t(slot.size()) != cell_count()) slot.assign(std::size_t(cell_count()), -1);
+        std::size_t listed = 0;
         for (int cj = cells.j0, k = 0; cj <= cells.j1; ++cj)
-            for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = k++;
-        const auto reachable = [&](std::int32_t id) {
+            for (int ci = cells.i0; ci <= cells.i1; ++ci) {
+                slot[std::size_t(cj * row + ci)] = k++;
+                listed += index_.rays_of(cj * row + ci).size();
+            }
+        const int threads = pool != nullptr ? pool->threads() : 1;
+        const int parts = int(std::min<std::size_t>({std::size_t(threads), std::size_t(cells.height()),
+                                                     listed / min_rays_per_thread}));
+        if (parts <= 1) {
+            scan_rows(cells, cells.j0, cells.j1 + 1, change, change.ray_mark, change.generation, change.rays,
+                      change.rays_culled);
+        } else {
+            ensure_parts(change, parts - 1);
+            for (int p = 1; p < parts; ++p) {
+                TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+                if (part.ray_mark.size() != change.ray_mark.size()) part.ray_mark.assign(change.ray_mark.size(), 0u);
+                if (++part.generation == 0) {
+                    std::fill(part.ray_mark.begin(), part.ray_mark.end(), 0u);
+                    part.generation = 1;
+                }
+                part.rays.clear();
+                part.rays_culled = 0;
+            }
+            const auto first_row = [&](int p) { return cells.j0 + cells.height() * p / parts; };
+            run_parts(*pool, parts, [&](int p) {
+                if (p == 0) {
+                    scan_rows(cells, first_row(0), first_row(1), change, change.ray_mark, change.generation,
+                              change.rays, change.rays_culled);
+                } else {
+                    TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+                    scan_rows(cells, first_row(p), first_row(p + 1), change, part.ray_mark, part.generation, part.rays,
+                              part.rays_culled);
+                }
+            });
+            for (int p = 1; p < parts; ++p) {
+                const TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+                change.rays.insert(change.rays.end(), part.rays.begin(), part.rays.end());
+                change.rays_culled += part.rays_culled;
+            }
+        }
+        for (int cj = cells.j0; cj <= cells.j1; ++cj)
+            for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
+    }
+
+    // The ray selection over the move's rows [j_begin, j_end) (collect_rays): rays that
+    // also cross a move cell of an earlier row are left to the thread that has that row.
+    void scan_rows(const Patch& cells, int j_begin, int j_end, const TraceChange& change,
+                   std::vector<std::uint32_t>& ray_mark, std::uint32_t generation, std::vector<std::int32_t>& out,
+                   std::int64_t& culled) const {
+        const int row = surface_->nx() - 1;
+        const std::int32_t first_slot = (j_begin - cells.j0) * cells.width();
+        const auto& slot = change.cell_slot;
+        enum class Verdict { earlier, reach, out_of_reach };
+        const auto judge = [&](std::int32_t id) {
+            bool reach = false;
             for (const CellCrossing& c : index_.cells_of(id)) {
                 const std::int32_t k = slot[std::size_t(c.cell)];
                 if (k < 0) continue;
+                if (k < first_slot) return Verdict::earlier;
                 const TraceChange::CellReach& r = change.reach[std::size_t(k)];
-                if ((c.zlo <= r.hi_before && c.zhi >= r.lo_before) || (c.zlo <= r.hi_after && c.zhi >= r.lo_after))
-                    return true;
+                reach = reach || (c.zlo <= r.hi_before && c.zhi >= r.lo_before) ||
+                        (c.zlo <= r.hi_after && c.zhi >= r.lo_after);
             }
-            return false;
+            return reach ? Verdict::reach : Verdict::out_of_reach;
         };
-        for (int cj = cells.j0; cj <= cells.j1; ++cj)
+        for (int cj = j_begin; cj < j_end; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci) {
                 // The listed rays' marks and cells are scattered: prefetch ahead.
                 const auto& listed = index_.rays_of(cj * row + ci);
@@ -674,21 +751,20 @@ private:
                 for (std::size_t k = 0; k < listed.size(); ++k) {
                     if (k + ahead < listed.size()) {
                         index_.prefetch_slot(listed[k + ahead]);
-                        prefetch(change.ray_mark.data() + listed[k + ahead]);
+                        prefetch(ray_mark.data() + listed[k + ahead]);
                     }
                     if (k + ahead / 2 < listed.size()) index_.prefetch_cells(listed[k + ahead / 2]);
                     const std::int32_t id = listed[k];
-                    auto& mark = change.ray_mark[std::size_t(id)];
-                    if (mark == change.generation) continue;
-                    mark = change.generation;
-                    if (reachable(id))
-                        change.rays.push_back(id);
-                    else
-                        ++change.rays_culled;
+                    auto& mark = ray_mark[std::size_t(id)];
+                    if (mark == generation) continue;
+                    mark = generation;
+                    switch (judge(id)) {
+                        case Verdict::reach: out.push_back(id); break;
+                        case Verdict::out_of_reach: ++culled; break;
+                        case Verdict::earlier: break;
+                    }
                 }
             }
-        for (int cj = cells.j0; cj <= cells.j1; ++cj)
-            for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
     }
 
     // Removes a ray's old deposit and adds its new one. A ray that moves a little keeps
