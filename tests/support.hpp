@@ -22,6 +22,18 @@ inline Scene basic_scene(int receiver_px = 100, double rays_per_cell = 16) {
     return s;
 }
 
+// A bar across the upper part of a w x h receiver and a block lower left: mass
+// off-centre, an empty gap, and sharp edges (a target for transport starts).
+inline ImageD two_blocks(int w, int h) {
+    ImageD t = ImageD::Zero(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const double u = (x + 0.5) / w, v = (y + 0.5) / h;
+            if ((v > 0.15 && v < 0.35 && u > 0.1 && u < 0.9) || (v > 0.55 && v < 0.9 && u > 0.15 && u < 0.5)) t(y, x) = 1;
+        }
+    return t;
+}
+
 inline Heightmap surface_for(const Scene& s, int n) {
     return Heightmap(n, n, s.surface.size, s.surface.h_min, s.surface.h_max, s.surface.frame, s.surface.aperture);
 }

@@ -15,6 +15,7 @@
 #include "support.hpp"
 
 using namespace freeform;
+using testing::two_blocks;
 
 namespace {
 
@@ -178,18 +179,6 @@ std::pair<double, double> start_and_flat_error(const Scene& s, const ImageD& tar
     const DesignStart st = make_design_start(s, testing::surface_for(s, mesh), target, 3, 1);
     REQUIRE(st.report.used == "transport");
     return {st.report.error, st.report.flat_error};
-}
-
-// A bar across the upper part of the receiver and a block lower left: mass off-centre,
-// an empty gap, and sharp edges.
-ImageD two_blocks(int w, int h) {
-    ImageD t = ImageD::Zero(h, w);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const double u = (x + 0.5) / w, v = (y + 0.5) / h;
-            if ((v > 0.15 && v < 0.35 && u > 0.1 && u < 0.9) || (v > 0.55 && v < 0.9 && u > 0.15 && u < 0.5)) t(y, x) = 1;
-        }
-    return t;
 }
 
 }  // namespace

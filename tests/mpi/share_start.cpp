@@ -18,6 +18,8 @@
 
 #include <freeform/mpi/replica_exchange.hpp>
 
+#include "../support.hpp"
+
 using namespace freeform;
 
 namespace {
@@ -39,17 +41,6 @@ bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
 template <class T>
 bool same_bytes(const T& a, const T& b) {
     return std::memcmp(&a, &b, sizeof(T)) == 0;
-}
-
-// A bar and a block on a 60² receiver: a transport start well below flat.
-ImageD two_blocks(int w, int h) {
-    ImageD t = ImageD::Zero(h, w);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const double u = (x + 0.5) / w, v = (y + 0.5) / h;
-            if ((v > 0.15 && v < 0.35 && u > 0.1 && u < 0.9) || (v > 0.55 && v < 0.9 && u > 0.15 && u < 0.5)) t(y, x) = 1;
-        }
-    return t;
 }
 
 void check_same_start(const SharedStart& got, const SharedStart& own, double rank0_seconds) {
@@ -103,7 +94,7 @@ int main(int argc, char** argv) {
         s.receiver.deposit = Deposit::bilinear;
         s.light.rays_per_cell = 8;
         s.target = TargetSpec{};  // starts from the transport surface
-        const ImageD target = two_blocks(60, 60);
+        const ImageD target = testing::two_blocks(60, 60);  // a transport start well below flat
         DesignOptions o = s.optimise;
         o.seed = 5;
         o.start_level = 0;  // the first level (15²) runs: the start is fitted again on it
