@@ -97,8 +97,9 @@ private:
             for (int spin = 0; spin < 2000 && !woke; ++spin) woke = generation_.load() != seen;
             // Runs often come back to back with a few tens of microseconds between them (one
             // proposal's rays split over the threads, then the caller's bookkeeping): stay
-            // awake that long, but yield the core to anything else that wants it.
-            for (int spin = 0; spin < 64 && !woke; ++spin) {
+            // awake about a millisecond (2,000 yields of about 0.5 µs here), but yield the
+            // core to anything else that wants it.
+            for (int spin = 0; spin < 2000 && !woke; ++spin) {
                 std::this_thread::yield();
                 woke = generation_.load() != seen;
             }

@@ -8,10 +8,11 @@
 // it has ended) is a mask, not a branch: a lane that is done simply stops changing.
 //
 // SIMD comes from std::experimental::simd (the Parallelism TS v2, in libstdc++ since
-// GCC 11 and usable from clang): no dependency beyond the standard library, and the
-// fixed_size<8> packet maps onto whatever the build enables (two SSE registers in a
-// baseline x86-64 build, one AVX register with -mavx2, half an AVX-512 register). The
-// lane count is fixed, so results never depend on the instruction set.
+// GCC 11 and usable from clang): no dependency beyond the standard library. A packet is
+// the build's own eight-lane type where it has one (one AVX register with -mavx2: each
+// selection one blend) and fixed_size<8> elsewhere (two SSE registers in a baseline
+// x86-64 build). The lane count is eight either way, so results never depend on the
+// instruction set.
 //
 // The packet covers the common path of a mirror: walks seen from the front, Phong
 // patches shaded with their true normal, the receiver. Rare cases within a packet are
