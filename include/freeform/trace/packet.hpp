@@ -94,25 +94,20 @@ FREEFORM_FORCE_INLINE F to_f(I v) { return stdx::static_simd_cast<F>(v); }
 FREEFORM_FORCE_INLINE I to_i(F v) { return stdx::static_simd_cast<I>(v); }
 // Masks of floats and of ints: the TS converts only fixed_size masks implicitly;
 // libstdc++'s static_simd_cast extension converts native ones.
-template <class M = IM>
-FREEFORM_FORCE_INLINE FM fm(M m) {
+template <class To, class M>
+FREEFORM_FORCE_INLINE To mask_cast(M m) {
     if constexpr (std::is_same_v<typename M::abi_type, stdx::simd_abi::fixed_size<width>>)
-        return FM(m);
+        return To(m);
     else
-        return stdx::__proposed::static_simd_cast<FM>(m);
+        return stdx::__proposed::static_simd_cast<To>(m);
 }
+FREEFORM_FORCE_INLINE FM fm(IM m) { return mask_cast<FM>(m); }
+FREEFORM_FORCE_INLINE IM im(FM m) { return mask_cast<IM>(m); }
 // Bit l set where lane l of m is set.
 FREEFORM_FORCE_INLINE unsigned lane_bits(FM m) {
     unsigned b = 0;
     for (int l = 0; l < width; ++l) b |= m[l] ? 1u << l : 0u;
     return b;
-}
-template <class M = FM>
-FREEFORM_FORCE_INLINE IM im(M m) {
-    if constexpr (std::is_same_v<typename M::abi_type, stdx::simd_abi::fixed_size<width>>)
-        return IM(m);
-    else
-        return stdx::__proposed::static_simd_cast<IM>(m);
 }
 
 // One lane's values, written by scalar code and read as a packet.
