@@ -136,7 +136,16 @@ def main() -> int:
     ap.add_argument("--fresh", action="store_true", help="repeat runs whose results exist")
     ap.add_argument("--report-only", action="store_true", help="only aggregate the runs on disk")
     ap.add_argument("--dry-run", action="store_true", help="print the plan and its estimated duration")
+    ap.add_argument("--fixed-iterations", help="CASE=N,... iteration caps of the stability-fixed methods instead "
+                    "of study_plan.FIXED_ITERATIONS (e.g. re-derived from newer time-budget runs)")
     args = ap.parse_args()
+
+    for item in (args.fixed_iterations or "").split(","):
+        if item:
+            case, _, n = item.partition("=")
+            if case not in plan.FIXED_ITERATIONS or not n.isdigit():
+                ap.error(f"--fixed-iterations: expected CASE=N with CASE one of {sorted(plan.FIXED_ITERATIONS)}, got {item!r}")
+            plan.FIXED_ITERATIONS[case] = int(n)  # the methods hold this dict: they see the change
 
     mode = "quick" if args.quick else "full"
     out_dir = args.out or (ROOT / "benchmarks/results" / ("quick" if args.quick else ""))
