@@ -220,54 +220,30 @@ struct LaneCellBuffer {
 };
 #endif
 
-// The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
-// commit(). Holds its own working memory so several can be evaluated concurrently.
-struct TraceChange {
-    std::vector<std::int32_t> rays;       // affected rays
-    std::vector<RayRecord> records;       // their new records
+// What one thread of a ray selection and retrace produces: the rays it selected, their
+// cells, the change of the histogram and of the weight per status. A TraceChange is its
+// own first part; a split over threads gives the others one each (TraceChange::parts),
+// merged in order afterwards.
+struct TracePart {
+    std::vector<std::int32_t> rays;       // affected rays (of this part)
     std::vector<CellCrossing> cells;      // their new cell lists, packed
-    std::vector<std::int32_t> cell_begin; // rays.size() + 1 offsets into cells
     SparseDelta histogram;                // change of R
     std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
     std::int64_t rays_moved = 0;          // rays whose record changed
     std::int64_t rays_culled = 0;         // rays listed on the move's cells that pass them out of reach
     std::vector<std::uint32_t> ray_mark;  // dedupe of affected rays (generation stamps)
-    // Height ranges of the move's cells before and after it, widened as the walk's
-    // culling test widens them (scratch of the ray selection).
-    struct CellReach {
-        float lo_before, hi_before, lo_after, hi_after;
-    };
-    std::vector<CellReach> reach;
-    std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
+    std::uint32_t generation = 0;
 #if !defined(__CUDACC__)
     LaneCellBuffer lane_cells;  // scratch of the packet retrace
 #endif
-    // What one thread of a split retrace produces besides the records (rays, records and
-    // cell offsets are written in place, each thread its own range): merged in order.
-    struct Part {
-        std::vector<std::int32_t> rays;  // the rays this thread selected (ray selection)
-        std::int64_t rays_culled = 0;
-        std::vector<std::uint32_t> ray_mark;  // this thread's dedupe (generation stamps)
-        std::uint32_t generation = 0;
-        std::vector<CellCrossing> cells;
-        SparseDelta histogram;
-        std::array<Fixed, 6> status_delta{};
-        std::int64_t rays_moved = 0;
-#if !defined(__CUDACC__)
-        LaneCellBuffer lane_cells;
-#endif
-    };
-    std::vector<std::unique_ptr<Part>> parts;  // parts 1, 2, ... (part 0 is this change)
-    std::uint32_t generation = 0;
 
-    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
+    // Empties the outputs and starts a new generation of marks.
+    void reset_part(std::int64_t ray_count, std::int64_t receiver_cells) {
         if (std::int64_t(ray_mark.size()) != ray_count) ray_mark.assign(std::size_t(ray_count), 0), generation = 0;
         if (std::int64_t(histogram.value.size()) != receiver_cells) histogram.resize(std::size_t(receiver_cells));
         histogram.clear();
         rays.clear();
-        records.clear();
         cells.clear();
-        cell_begin.clear();
         status_delta.fill(0);
         rays_moved = 0;
         rays_culled = 0;
@@ -275,6 +251,27 @@ struct TraceChange {
             std::fill(ray_mark.begin(), ray_mark.end(), 0u);
             generation = 1;
         }
+    }
+};
+
+// The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
+// commit(). Holds its own working memory so several can be evaluated concurrently.
+struct TraceChange : TracePart {
+    std::vector<RayRecord> records;       // new records of `rays`
+    std::vector<std::int32_t> cell_begin; // rays.size() + 1 offsets into cells
+    // Height ranges of the move's cells before and after it, widened as the walk's
+    // culling test widens them (scratch of the ray selection).
+    struct CellReach {
+        float lo_before, hi_before, lo_after, hi_after;
+    };
+    std::vector<CellReach> reach;
+    std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
+    std::vector<std::unique_ptr<TracePart>> parts;  // parts 1, 2, ... of a split (part 0 is this change)
+
+    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
+        reset_part(ray_count, receiver_cells);
+        records.clear();
+        cell_begin.clear();
     }
 };
 
@@ -458,9 +455,15 @@ private:
         return true;
     }
 
-    // change.parts[0, count) exist (parts 1 .. count of a split).
-    static void ensure_parts(TraceChange& change, int count) {
-        while (change.parts.size() < std::size_t(count)) change.parts.push_back(std::make_unique<TraceChange::Part>());
+    // Makes parts 1 .. parts - 1 of a split ready; part(change, p) is part p (part 0: the
+    // change itself).
+    void start_parts(TraceChange& change, int parts) const {
+        while (change.parts.size() < std::size_t(parts - 1)) change.parts.push_back(std::make_unique<TracePart>());
+        for (int p = 1; p < parts; ++p)
+            change.parts[std::size_t(p - 1)]->reset_part(rays_->size(), std::int64_t(change.histogram.value.size()));
+    }
+    static TracePart& part(TraceChange& change, int p) {
+        return p == 0 ? change : *change.parts[std::size_t(p - 1)];
     }
 
     // Runs task(p) for p in [0, parts) on the pool; the first exception (in part order) is
@@ -490,7 +493,8 @@ private:
             CellCollector visit{&change.cells, change.cells.size(), cells_per_row};
             const RayRecord now = retrace(change.rays[k], visit);
             visit.finish();
-            account(change, k, now);
+            change.records[k] = now;
+            account(change.rays[k], now, change);
         }
         change.cell_begin[change.rays.size()] = std::int32_t(change.cells.size());
     }
@@ -521,15 +525,6 @@ private:
         out.insert(out.end(), lanes.cell[l], lanes.cell[l] + n);
     }
 
-    // Where a range of a retrace puts what it finds besides records and cell offsets.
-    struct PartOut {
-        std::vector<CellCrossing>& cells;
-        SparseDelta& histogram;
-        std::array<Fixed, 6>& status_delta;
-        std::int64_t& rays_moved;
-        LaneCellBuffer& lane_cells;
-    };
-
     // retrace_into with the packet tracer, eight rays at a time, split over the pool's
     // threads when the move has rays enough.
     template <class View>
@@ -538,11 +533,10 @@ private:
         change.records.resize(n);
         change.cell_begin.resize(n + 1);
         const hf_detail::Grid grid = hf_detail::grid_of(view);
-        PartOut main{change.cells, change.histogram, change.status_delta, change.rays_moved, change.lane_cells};
         const int threads = pool != nullptr ? pool->threads() : 1;
         const int parts = int(std::min<std::size_t>(std::size_t(threads), n / min_rays_per_thread));
         if (parts <= 1) {
-            retrace_packets_range(view, grid, change, 0, n, main);
+            retrace_packets_range(view, grid, change, 0, n, change);
             change.cell_begin[n] = std::int32_t(change.cells.size());
             return;
         }
@@ -553,38 +547,22 @@ private:
         for (int p = 0; p <= parts; ++p)
             bound[std::size_t(p)] = std::min(n, (n * std::size_t(p) / std::size_t(parts) + packet::width - 1) /
                                                     packet::width * packet::width);
-        bound[std::size_t(parts)] = n;
-        ensure_parts(change, parts - 1);
-        for (int p = 1; p < parts; ++p) {
-            TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-            if (part.histogram.value.size() != change.histogram.value.size())
-                part.histogram.resize(change.histogram.value.size());
-            part.histogram.clear();
-            part.cells.clear();
-            part.status_delta.fill(0);
-            part.rays_moved = 0;
-        }
+        start_parts(change, parts);
         run_parts(*pool, parts, [&](int p) {
-            if (p == 0) {
-                retrace_packets_range(view, grid, change, bound[0], bound[1], main);
-            } else {
-                TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-                PartOut out{part.cells, part.histogram, part.status_delta, part.rays_moved, part.lane_cells};
-                retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], out);
-            }
+            retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], part(change, p));
         });
         for (int p = 1; p < parts; ++p) {
-            TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
+            TracePart& other = *change.parts[std::size_t(p - 1)];
             const auto offset = std::int32_t(change.cells.size());
             for (std::size_t k = bound[std::size_t(p)]; k < bound[std::size_t(p) + 1]; ++k) change.cell_begin[k] += offset;
-            change.cells.insert(change.cells.end(), part.cells.begin(), part.cells.end());
-            for (auto c : part.histogram.touched) {  // a cell may be listed twice: take it once
-                Fixed& v = part.histogram.value[std::size_t(c)];
+            change.cells.insert(change.cells.end(), other.cells.begin(), other.cells.end());
+            for (auto c : other.histogram.touched) {  // a cell may be listed twice: take it once
+                Fixed& v = other.histogram.value[std::size_t(c)];
                 if (v != 0) change.histogram.add(c, v);
                 v = 0;
             }
-            for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += part.status_delta[st];
-            change.rays_moved += part.rays_moved;
+            for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += other.status_delta[st];
+            change.rays_moved += other.rays_moved;
         }
         change.cell_begin[n] = std::int32_t(change.cells.size());
     }
@@ -593,7 +571,7 @@ private:
     // in place, the rest into `out`.
     template <class View>
     void retrace_packets_range(const View& view, const hf_detail::Grid& grid, TraceChange& change,
-                               std::size_t begin, std::size_t end, PartOut& out) const {
+                               std::size_t begin, std::size_t end, TracePart& out) const {
         Vec3 o[packet::width], d[packet::width];
         RayRecord rec[packet::width];
         for (std::size_t k0 = begin; k0 < end; k0 += packet::width) {
@@ -617,7 +595,7 @@ private:
                 change.cell_begin[k] = std::int32_t(out.cells.size());
                 append_lane_cells(view, out.lane_cells, l, o[l], d[l], rec[l], out.cells);
                 change.records[k] = rec[l];
-                account(change.rays[k], rec[l], out.histogram, out.status_delta, out.rays_moved);
+                account(change.rays[k], rec[l], out);
             }
         }
     }
@@ -625,19 +603,15 @@ private:
 
     // Stores the new record of change.rays[k] and, if it differs from the maintained one,
     // moves the ray's weight.
-    void account(TraceChange& change, std::size_t k, const RayRecord& now) const {
-        change.records[k] = now;
-        account(change.rays[k], now, change.histogram, change.status_delta, change.rays_moved);
-    }
-    void account(std::int32_t id, const RayRecord& now, SparseDelta& histogram, std::array<Fixed, 6>& status_delta,
-                 std::int64_t& rays_moved) const {
+    // If ray `id`'s new record differs from the maintained one, moves its weight (in `out`).
+    void account(std::int32_t id, const RayRecord& now, TracePart& out) const {
         const RayRecord& before = records_[std::size_t(id)];
         if (now == before) return;
-        ++rays_moved;
+        ++out.rays_moved;
         const Fixed w = rays_->weight[std::size_t(id)];
-        status_delta[std::size_t(before.status)] -= w;
-        status_delta[std::size_t(now.status)] += w;
-        move_deposit(before, now, w, histogram);
+        out.status_delta[std::size_t(before.status)] -= w;
+        out.status_delta[std::size_t(now.status)] += w;
+        move_deposit(before, now, w, out.histogram);
     }
 
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
@@ -686,35 +660,15 @@ private:
         const int parts = int(std::min<std::size_t>({std::size_t(threads), std::size_t(cells.height()),
                                                      listed / min_rays_per_thread}));
         if (parts <= 1) {
-            scan_rows(cells, cells.j0, cells.j1 + 1, change, change.ray_mark, change.generation, change.rays,
-                      change.rays_culled);
+            scan_rows(cells, cells.j0, cells.j1 + 1, change, change);
         } else {
-            ensure_parts(change, parts - 1);
-            for (int p = 1; p < parts; ++p) {
-                TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-                if (part.ray_mark.size() != change.ray_mark.size()) part.ray_mark.assign(change.ray_mark.size(), 0u);
-                if (++part.generation == 0) {
-                    std::fill(part.ray_mark.begin(), part.ray_mark.end(), 0u);
-                    part.generation = 1;
-                }
-                part.rays.clear();
-                part.rays_culled = 0;
-            }
+            start_parts(change, parts);
             const auto first_row = [&](int p) { return cells.j0 + cells.height() * p / parts; };
-            run_parts(*pool, parts, [&](int p) {
-                if (p == 0) {
-                    scan_rows(cells, first_row(0), first_row(1), change, change.ray_mark, change.generation,
-                              change.rays, change.rays_culled);
-                } else {
-                    TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-                    scan_rows(cells, first_row(p), first_row(p + 1), change, part.ray_mark, part.generation, part.rays,
-                              part.rays_culled);
-                }
-            });
+            run_parts(*pool, parts, [&](int p) { scan_rows(cells, first_row(p), first_row(p + 1), change, part(change, p)); });
             for (int p = 1; p < parts; ++p) {
-                const TraceChange::Part& part = *change.parts[std::size_t(p - 1)];
-                change.rays.insert(change.rays.end(), part.rays.begin(), part.rays.end());
-                change.rays_culled += part.rays_culled;
+                const TracePart& other = *change.parts[std::size_t(p - 1)];
+                change.rays.insert(change.rays.end(), other.rays.begin(), other.rays.end());
+                change.rays_culled += other.rays_culled;
             }
         }
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
@@ -723,9 +677,10 @@ private:
 
     // The ray selection over the move's rows [j_begin, j_end) (collect_rays): rays that
     // also cross a move cell of an earlier row are left to the thread that has that row.
-    void scan_rows(const Patch& cells, int j_begin, int j_end, const TraceChange& change,
-                   std::vector<std::uint32_t>& ray_mark, std::uint32_t generation, std::vector<std::int32_t>& out,
-                   std::int64_t& culled) const {
+    // Selected rays go to out.rays, deduplicated with out's marks.
+    void scan_rows(const Patch& cells, int j_begin, int j_end, const TraceChange& change, TracePart& out) const {
+        auto& ray_mark = out.ray_mark;
+        const std::uint32_t generation = out.generation;
         const int row = surface_->nx() - 1;
         const std::int32_t first_slot = (j_begin - cells.j0) * cells.width();
         const auto& slot = change.cell_slot;
@@ -759,8 +714,8 @@ private:
                     if (mark == generation) continue;
                     mark = generation;
                     switch (judge(id)) {
-                        case Verdict::reach: out.push_back(id); break;
-                        case Verdict::out_of_reach: ++culled; break;
+                        case Verdict::reach: out.rays.push_back(id); break;
+                        case Verdict::out_of_reach: ++out.rays_culled; break;
                         case Verdict::earlier: break;
                     }
                 }

@@ -102,11 +102,11 @@ FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed
 }
 
 // Splits a ray's weight over receiver cells: calls add(cell_index, amount) for each
-// share of splat() (an empty share too: adding 0 changes nothing).
+// share of splat() (the first only without bilinear deposits: the others are empty).
 template <class Add>
 FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixed w, Add&& add) {
     const Splat s = splat(rv, px, py, w);
-    for (int k = 0; k < 4; ++k) add(s.cell[k], s.amount[k]);
+    for (int k = 0, n = rv.bilinear ? 4 : 1; k < n; ++k) add(s.cell[k], s.amount[k]);
 }
 
 // The nearest hit of a segment on a triangle of the surface (or of an extra mesh).
