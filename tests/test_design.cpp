@@ -48,6 +48,8 @@ void check_identical(const DesignResult& a, const DesignResult& b) {
     CHECK(a.accepted == b.accepted);
     CHECK(a.rays == b.rays);
     CHECK(a.bandit_weights == b.bandit_weights);
+    CHECK(same_bits(a.held_out.total, b.held_out.total));
+    CHECK(a.held_out_seed == b.held_out_seed);
     REQUIRE(a.stages.size() == b.stages.size());
     for (std::size_t k = 0; k < a.stages.size(); ++k) {
         CAPTURE(k);
@@ -56,6 +58,10 @@ void check_identical(const DesignResult& a, const DesignResult& b) {
         CHECK(same_bits(a.stages[k].initial_temperature, b.stages[k].initial_temperature));
         CHECK(same_bits(a.stages[k].error_end, b.stages[k].error_end));
         CHECK(a.stages[k].stop_reason == b.stages[k].stop_reason);
+        CHECK(same_bits(a.stages[k].held_out_start, b.stages[k].held_out_start));
+        CHECK(same_bits(a.stages[k].held_out_end, b.stages[k].held_out_end));
+        CHECK(a.stages[k].held_out_checks == b.stages[k].held_out_checks);
+        CHECK(a.stages[k].held_out_kept == b.stages[k].held_out_kept);
         CHECK(a.stages[k].bandit_weights == b.stages[k].bandit_weights);
     }
     REQUIRE(a.convergence.size() == b.convergence.size());
@@ -354,6 +360,71 @@ TEST_CASE("same seed, same result; any thread count and speculation width, same 
     CHECK_FALSE(same_bits(a.surface.heights(), b.surface.heights()));
     CHECK_FALSE(a.irradiance == b.irradiance);
     CHECK(a.value.error != b.value.error);
+}
+
+// ------------------------------------------------------------------------- held-out checks
+
+TEST_CASE("held-out checks: the kept state is no worse on held-out rays than the annealer's best; reports agree") {
+    // One level, one stage, a ray per four receiver cells on a 17² mesh: few enough rays
+    // that the annealer lowers its objective by fitting where its own rays land. Several
+    // seeds, so that some run passes through a state the held-out rays prefer to the
+    // annealer's best.
+    SmallCase c = small_case();
+    c.scene.light.rays_per_cell = 0.25;
+    LevelPlan only = c.options.levels.back();
+    only.kernel_supports = {3};
+    only.iterations = 4000;
+    int restored = 0;
+    for (std::uint64_t seed = 11; seed < 17; ++seed) {
+        CAPTURE(seed);
+        DesignOptions on = c.options;
+        on.seed = seed;
+        on.levels = {only};
+        on.preprocess_iterations = 0;
+        DesignOptions off = on;
+        off.held_out_checks = false;
+        const DesignResult a = run(c, on);
+        const DesignResult b = run(c, off);
+        REQUIRE(a.stages.size() == 1);
+        REQUIRE(b.stages.size() == 1);
+
+        // Off: nothing checked, nothing reported.
+        CHECK(b.stages[0].held_out_checks == 0);
+        CHECK(b.stages[0].held_out_start < 0);
+        CHECK(b.held_out.total < 0);
+        // On: the start, every interval (500 iterations here) and the end.
+        const StageReport& s = a.stages[0];
+        CHECK(s.held_out_checks == 2 + 4000 / 500 - 1);
+        CHECK(s.held_out_end <= s.held_out_start);
+
+        // The checks do not change the run's course; when they keep another state than
+        // the annealer's best (which the run without checks ends with), that state is
+        // worse on the fitted rays and better on the held-out ones.
+        CHECK(a.iterations == b.iterations);
+        CHECK(a.accepted == b.accepted);
+        Heightmap start = surface_for(c.scene, SmallCase::mesh);
+        const Penalties none = default_penalties(on);
+        const ObjectiveWeights w{on.sobel_weight, on.energy_threshold, on.lost_light_weight};
+        HeldOutCheck judge(start, c.scene.light, c.scene.receiver, make_path_params(c.scene), c.target, w, none,
+                           a.held_out_seed, 1);
+        if (s.held_out_kept < 0) {
+            CHECK(same_bits(a.surface.heights(), b.surface.heights()));
+        } else {
+            ++restored;
+            CHECK(s.held_out_kept < 4000);
+            CHECK(a.value.total > b.value.total);
+            CHECK(judge(a.surface).total < judge(b.surface).total);
+        }
+        CHECK(same_bits(judge(a.surface).total, a.held_out.total));
+        // The reported held-out error is the final surface traced with the rays of
+        // a.held_out_seed (another seed than the design's own).
+        CHECK(a.held_out_seed != on.seed);
+        CHECK(a.held_out.error ==
+              doctest::Approx(error_of(c.scene, a.surface, c.target, a.held_out_seed)).epsilon(1e-12));
+        // On these few rays the fitted error is optimistic: the held-out one is higher.
+        CHECK(a.held_out.error > a.value.error);
+    }
+    CHECK(restored > 0);
 }
 
 // ------------------------------------------------------------------------- replicas

@@ -553,7 +553,9 @@ int run_design(const DesignArgs& a) {
     // half-written files (each file is written atomically, but the set should be whole).
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
 
-    // Final evaluation at the scene's full resolution, with the scene's seed.
+    // Final evaluation at the scene's full resolution, with the scene's seed (the rays the
+    // design was fitted to) and, unless the checks are off, with the held-out rays of the
+    // final level (design/held_out.hpp), which it was not fitted to.
     const RaySet rays = generate_rays(scene.light, result.surface, scene.receiver, options.seed);
     const PathParams pp = make_path_params(scene);
     HeightfieldTracer tracer(result.surface, rays, pp);
@@ -562,13 +564,23 @@ int run_design(const DesignArgs& a) {
     tracer.trace_all(exec::omp_t{options.threads}, hist, totals);
     const Target t = make_target(target, scene.receiver.width, scene.receiver.height, rays.total);
     const double error = l1_error(hist, t);
+    std::optional<double> error_held_out;
+    if (result.held_out.total >= 0) {
+        const RaySet held = generate_rays(scene.light, result.surface, scene.receiver, result.held_out_seed);
+        Histogram h(scene.receiver.width, scene.receiver.height);
+        TraceTotals ht;
+        HeightfieldTracer(result.surface, held, pp).trace_all(exec::omp_t{options.threads}, h, ht);
+        error_held_out = l1_error(h, make_target(target, scene.receiver.width, scene.receiver.height, held.total));
+    }
 
     json m;
     m["command"] = "design";
     m["scene"] = a.scene.string();
     m["error"] = error;
+    if (error_held_out) m["error_held_out"] = *error_held_out;
     m["energy"] = totals.energy();
     m["objective"] = result.value.total;
+    if (result.held_out.total >= 0) m["objective_held_out"] = result.held_out.total;
     m["iterations"] = result.iterations;
     m["accepted"] = result.accepted;
     m["seconds"] = result.seconds;
@@ -614,7 +626,8 @@ int run_design(const DesignArgs& a) {
         r["winner_rank"] = winner;
         r["winner_final_rung"] = replicas.rungs()[std::size_t(winner)];
         r["final_rungs"] = replicas.rungs();
-        r["objectives"] = replica_objectives;
+        r["objectives"] = replica_objectives;  // what picked the winner: held-out when checked
+        r["objectives_judged_on"] = result.held_out.total >= 0 ? "held-out rays" : "fitted rays";
         r["iterations_all_ranks"] = iterations_all;
         r["threads_per_rank"] = layout.threads;
         r["cores_per_rank"] = layout.cores;  // cores each rank was bound to (0: unknown)
@@ -676,6 +689,12 @@ int run_design(const DesignArgs& a) {
                     result.stopped_early ? "interrupted" : "done", error, totals.energy(),
                     (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                     result.stopped_early ? " -- best result so far written" : "");
+        if (error_held_out)
+            std::printf("  with rays it was not fitted to: error %.4f%s\n", *error_held_out,
+                        *error_held_out > 1.1 * error
+                            ? " (well above: the design fits its rays' sampling noise; more light.rays_per_cell "
+                              "would help)"
+                            : "");
         if (error_exported)
             std::printf("  exported mesh (%zu triangles, %d x %d facets per cell) traced as flat triangles: error "
                         "%.4f\n",

@@ -319,8 +319,14 @@ elseif(GROUP STREQUAL "design")
   expect_files("${WORK}/design1" ${files})
   set(m "${WORK}/design1/metrics.json")
   if(EXISTS "${m}")
-    expect_keys("${m}" error energy iterations seconds iterations_per_second levels seed tracer bandit_weights
-                interrupted)
+    expect_keys("${m}" error error_held_out energy iterations seconds iterations_per_second levels seed tracer
+                bandit_weights interrupted)
+    # The same surface traced with rays it was not fitted to (held-out checks, on by
+    # default): another render of the same design, so near the fitted error.
+    json_get(error_held_out "${m}" error_held_out)
+    if(NOT (error_held_out GREATER 0 AND error_held_out LESS 0.6))
+      fail("design: error_held_out ${error_held_out}, expected in (0, 0.6)")
+    endif()
     json_get(iterations "${m}" iterations)
     json_get(seed "${m}" seed)
     json_get(error "${m}" error)

@@ -27,6 +27,7 @@
 #include "../scene/scene.hpp"
 #include "../surface/refine.hpp"
 #include "../trace/setup.hpp"
+#include "held_out.hpp"
 #include "problem.hpp"
 #include "replicas.hpp"
 #include "start.hpp"
@@ -57,6 +58,12 @@ struct StageReport {
     std::int64_t rays = 0;
     std::vector<double> bandit_weights;
     std::string stop_reason;
+    // Held-out checks (held_out.hpp; all -1 / 0 when optimise.held_out_checks is off).
+    double held_out_start = -1;  // error of the stage's start on the held-out rays
+    double held_out_end = -1;    // ... of the state the stage ends with
+    std::int64_t held_out_checks = 0;
+    std::int64_t held_out_kept = -1;  // stage iteration of the state kept instead of the
+                                      // annealer's best (-1: the annealer's best was kept)
 };
 
 struct ConvergencePoint {
@@ -82,6 +89,10 @@ struct DesignResult {
     std::vector<double> bandit_weights;    // of the last stage
     std::vector<double> preprocess_rates;  // reward per pull of each shape in the pre-process
     std::int64_t rays = 0;
+    // The final design traced with the final level's held-out rays (held_out.hpp), which
+    // it was not fitted to; held_out.total < 0 when the checks are off.
+    ObjectiveValue held_out{-1, -1, -1, -1, -1};
+    std::uint64_t held_out_seed = 0;  // the seed of those rays (generate_rays)
 };
 
 // How "photographic" a target is: the fraction of pixels with intermediate grey levels.
@@ -251,21 +262,51 @@ inline ProposalSettings proposals_for(const DesignOptions& o, int support, const
     return p;
 }
 
+// The temperature T at which uphill moves of sizes `up` are accepted with mean
+// probability p: mean(exp(-d / T)) = p, which lies between min(d) / ln(1/p) and
+// max(d) / ln(1/p); solved by bisection on log T. 1e-12 when no move went uphill.
+inline double acceptance_temperature(const std::vector<double>& up, double p) {
+    if (up.empty()) return 1e-12;
+    p = std::clamp(p, 1e-6, 0.999);
+    const double l = -std::log(p);
+    const auto [dmin, dmax] = std::minmax_element(up.begin(), up.end());
+    double lo = std::max(*dmin / l, 1e-300), hi = std::max(*dmax / l, lo);
+    for (int it = 0; it < 100 && hi > lo * (1 + 1e-12); ++it) {
+        const double mid = std::sqrt(lo * hi);
+        double mean = 0;
+        for (double d : up) mean += std::exp(-d / mid);
+        mean /= double(up.size());
+        (mean > p ? hi : lo) = mid;
+    }
+    return std::max(std::sqrt(lo * hi), 1e-12);
+}
+
 struct Calibration {
     double temperature = 0;       // initial temperature of the stage
     double moves_per_second = 0;  // single-thread delta evaluations per second, measured
 };
 
-// Initial temperature such that a typical uphill move is accepted with probability p,
-// from a few trial moves (evaluated, never applied); their timing estimates the speed.
+// Initial temperature from a few trial moves (evaluated, never applied): the T at which
+// the uphill ones would be accepted with mean probability p, mean(exp(-delta / T)) = p
+// (the acceptance ratio of the textbook initial-temperature rules, e.g. Ben-Ameur,
+// Comput. Optim. Appl. 29, 2004); their timing estimates the speed.
+//
+// Until 2026-11 the rule was T = mean(delta) / ln(1/p), "a typical uphill move accepted
+// with p". Uphill deltas are heavy-tailed (many nearly neutral moves, a few bad ones),
+// so that T accepted most small uphill moves: from a transport start every stage first
+// drifted up (letter E: error 0.0426 -> 0.0527 in its first stage, which then ended
+// where it began) and spent most of its iterations coming back down. The acceptance
+// ratio rule starts 10 to 10^5 times colder; at equal iterations every case ended
+// 12-40 % lower (benchmarks/results/calibration). The temperature still sets the move
+// amplitudes (ProposalSettings), which it scales from this reference.
+//
 // With `timed`, slow moves cut the trials short (a time-budgeted run must not spend its
 // budget calibrating); otherwise there are always 48, so that the temperature, and with
 // it the run, does not depend on the machine's speed or load.
 template <class Problem>
 Calibration calibrate(Problem& problem, std::uint64_t seed, double p, bool timed) {
     typename Problem::Move m;
-    double sum = 0;
-    int up = 0;
+    std::vector<double> up;
     const auto start = std::chrono::steady_clock::now();
     const auto seconds_since = [&] {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -276,11 +317,10 @@ Calibration calibrate(Problem& problem, std::uint64_t seed, double p, bool timed
         CounterRng rng(hash_combine(seed, 0xca11b7a7eULL), std::uint64_t(trials));
         problem.propose(rng, 1.0, m);
         const double d = problem.delta(m);
-        if (d > 0) sum += d, ++up;
+        if (d > 0) up.push_back(d);
     }
-    const double seconds = seconds_since();
-    const double mean_up = up > 0 ? sum / up : 1e-6;
-    return {std::max(mean_up, 1e-12) / -std::log(std::clamp(p, 1e-6, 0.999)), trials / std::max(seconds, 1e-9)};
+    const double speed = trials / std::max(seconds_since(), 1e-9);
+    return {acceptance_temperature(up, p), speed};
 }
 
 }  // namespace design_detail
@@ -353,6 +393,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
         level_scene.receiver = receiver;
         const PathParams pp = make_path_params(level_scene);
         const double unit = design_detail::amplitude_unit(scene, receiver, surface);
+        const ObjectiveWeights level_weights{options.sobel_weight, options.energy_threshold,
+                                             options.lost_light_weight};
+        std::optional<HeldOutCheck> held_out;
+        if (options.held_out_checks)
+            held_out.emplace(surface, light, receiver, pp, target_image, level_weights, penalties,
+                             HeldOutCheck::seed_for(options.seed, li), threads);
 
         const std::size_t stages = level.kernel_supports.empty() ? 1 : level.kernel_supports.size();
         const double level_share = level.time_share;
@@ -398,7 +444,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
                                                                                   timed_calibration);
-            const double t0 = replicas.common_temperature(cal.temperature);  // identity for one replica
+            const double t0 = replicas.common_temperature(cal.temperature * options.initial_temperature_scale);  // identity for one replica
             problem.set_reference_temperature(t0);
 
             StageReport report;
@@ -411,6 +457,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             report.initial_temperature = t0;
             report.error_start = problem.value().error;
             report.rays = rays.size();
+            HeldOutBest held_best;
+            if (held_out) {
+                const ObjectiveValue v = (*held_out)(surface);
+                held_best.offer(surface, v, 0);
+                report.held_out_start = v.error;
+            }
 
             AnnealOptions ao;
             ao.seed = replicas.anneal_seed(stage_seed);
@@ -472,6 +524,16 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 Replicas* replicas = nullptr;  // set when replicas are active
                 double stage_deadline = 0;     // seconds since the design started; 0 = none
                 double target = 0;             // target error; 0 = none
+                HeldOutCheck* held_out = nullptr;  // set when held-out checks are on
+                HeldOutBest* held_best = nullptr;
+                std::int64_t next_check = 0;
+                // Held-out checks at the first sync point past each interval: sync points
+                // are fixed iterations, so the checks do not change the run's course.
+                void batch(const BatchStats& b) {
+                    if (!held_out || b.iteration < next_check) return;
+                    held_best->offer(problem->surface(), (*held_out)(problem->surface()), b.iteration);
+                    next_check = b.iteration + held_out->interval();
+                }
                 bool exchange(AnnealExchange& x) {
                     if (!replicas) return false;
                     ReplicaExchange r;
@@ -511,6 +573,11 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             hooks.info.mesh = std::max(level.mesh_x, level.mesh_y);
             hooks.info.resolution = std::max(receiver.width, receiver.height);
             hooks.info.kernel_support = report.kernel_support;
+            if (held_out) {
+                hooks.held_out = &*held_out;
+                hooks.held_best = &held_best;
+                hooks.next_check = held_out->interval();
+            }
             if (replicas.active()) {
                 hooks.replicas = &replicas;
                 hooks.stage_deadline = options.time_budget > 0 ? elapsed() + stage_time : 0;
@@ -518,6 +585,18 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             }
 
             const AnnealResult ar = anneal(problem, ao, hooks);
+            if (held_out) {
+                // The annealer ends holding its best state on the fitted rays; a state
+                // the held-out rays judged better replaces it.
+                const ObjectiveValue end = (*held_out)(surface);
+                report.held_out_end = end.error;
+                if (!held_best.offer(surface, end, ar.iterations)) {
+                    problem.replace_heights(held_best.heights);
+                    report.held_out_end = held_best.value.error;
+                    report.held_out_kept = held_best.iteration;
+                }
+                report.held_out_checks = held_out->checks();
+            }
             total_iterations += ar.iterations;
             result.accepted += ar.accepted;
             report.iterations = ar.iterations;
@@ -570,6 +649,21 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             result.value = final_state.value();
             result.rays = rays.size();
         }
+    }
+    if (options.held_out_checks) {
+        // The final design on the final level's held-out rays (the same rays as its
+        // checks): the error a user can expect from another render of this surface.
+        const LevelPlan& final_level = levels.back();
+        Receiver receiver = scene.receiver;
+        receiver.width = final_level.resolution_x;
+        receiver.height = final_level.resolution_y;
+        Scene final_scene = scene;
+        final_scene.receiver = receiver;
+        HeldOutCheck check(surface, scene.light, receiver, make_path_params(final_scene), target_image,
+                           ObjectiveWeights{options.sobel_weight, options.energy_threshold, options.lost_light_weight},
+                           penalties, HeldOutCheck::seed_for(options.seed, levels.size() - 1), threads);
+        result.held_out = check(surface);
+        result.held_out_seed = HeldOutCheck::seed_for(options.seed, levels.size() - 1);
     }
     result.surface = std::move(surface);
     result.iterations = total_iterations;

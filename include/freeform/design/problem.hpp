@@ -194,6 +194,14 @@ public:
         rebuild();
     }
 
+    // Sets the surface to `heights` (same mesh) and recomputes everything from them.
+    void replace_heights(const std::vector<float>& heights) {
+        surface_->set_heights(heights);
+        backend_.committed(surface_->full_patch());
+        best_heights_.clear();
+        rebuild();
+    }
+
 private:
     void choose_centre(CounterRng& rng, int& ci, int& cj) const {
         const int nx = surface_->nx(), ny = surface_->ny();

@@ -12,7 +12,7 @@
 namespace freeform {
 
 inline nlohmann::json stage_report_json(const StageReport& s) {
-    return {{"level", s.level},
+    nlohmann::json j{{"level", s.level},
             {"mesh", nlohmann::json::array({s.mesh_x, s.mesh_y})},
             {"resolution", nlohmann::json::array({s.resolution_x, s.resolution_y})},
             {"kernel_support", s.kernel_support},
@@ -27,6 +27,12 @@ inline nlohmann::json stage_report_json(const StageReport& s) {
             {"energy_end", s.energy_end},
             {"stop", s.stop_reason},
             {"bandit_weights", s.bandit_weights}};
+    if (s.held_out_start >= 0)
+        j["held_out"] = {{"error_start", s.held_out_start},
+                         {"error_end", s.held_out_end},
+                         {"checks", s.held_out_checks},
+                         {"kept_iteration", s.held_out_kept}};
+    return j;
 }
 
 // Where the design started (metrics.json "start"): the shape asked for and used, the

@@ -189,6 +189,7 @@ inline std::vector<char> pack_result(const DesignResult& r) {
         p.put(s.kernel_support), p.put(s.iterations), p.put(s.accepted), p.put(s.proposals_evaluated);
         p.put(s.seconds), p.put(s.initial_temperature), p.put(s.error_start), p.put(s.error_end);
         p.put(s.energy_end), p.put(s.objective_end), p.put(s.rays);
+        p.put(s.held_out_start), p.put(s.held_out_end), p.put(s.held_out_checks), p.put(s.held_out_kept);
         p.put_vector(s.bandit_weights);
         p.put_string(s.stop_reason);
     }
@@ -197,6 +198,8 @@ inline std::vector<char> pack_result(const DesignResult& r) {
     p.put_vector(r.bandit_weights);
     p.put_vector(r.preprocess_rates);
     p.put(r.rays);
+    p.put(r.held_out);
+    p.put(r.held_out_seed);
     return std::move(p.bytes);
 }
 
@@ -224,6 +227,8 @@ inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
         s.seconds = u.get<double>(), s.initial_temperature = u.get<double>(), s.error_start = u.get<double>();
         s.error_end = u.get<double>(), s.energy_end = u.get<double>(), s.objective_end = u.get<double>();
         s.rays = u.get<std::int64_t>();
+        s.held_out_start = u.get<double>(), s.held_out_end = u.get<double>();
+        s.held_out_checks = u.get<std::int64_t>(), s.held_out_kept = u.get<std::int64_t>();
         s.bandit_weights = u.get_vector<double>();
         s.stop_reason = u.get_string();
     }
@@ -232,6 +237,8 @@ inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
     r.bandit_weights = u.get_vector<double>();
     r.preprocess_rates = u.get_vector<double>();
     r.rays = u.get<std::int64_t>();
+    r.held_out = u.get<ObjectiveValue>();
+    r.held_out_seed = u.get<std::uint64_t>();
 }
 
 // The start every replica of a design uses (design/start.hpp), sent by the rank that
@@ -431,16 +438,20 @@ public:
     // Picks the replica with the lowest objective (ties: lowest rank) and moves its result
     // to rank 0; on rank 0 `result` is then the winner's. Returns the winning rank (on
     // every rank). `objectives` receives every rank's final objective, in rank order.
+    // The objective is the held-out one when the design made held-out checks (every
+    // replica has the same held-out rays): the fitted one favours the replica that fitted
+    // its rays' noise best.
+    static double judged(const DesignResult& r) { return r.held_out.total >= 0 ? r.held_out.total : r.value.total; }
     int gather_best(DesignResult& result, std::vector<double>* objectives = nullptr) const {
         struct {
             double value;
             int rank;
-        } in{result.value.total, rank_}, out{};
+        } in{judged(result), rank_}, out{};
         if (!std::isfinite(in.value)) in.value = std::numeric_limits<double>::max();
         detail::check(MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, comm_), "MPI_Allreduce");
         if (objectives) {
             objectives->assign(std::size_t(size_), 0.0);
-            double mine = result.value.total;
+            double mine = judged(result);
             detail::check(MPI_Gather(&mine, 1, MPI_DOUBLE, objectives->data(), 1, MPI_DOUBLE, 0, comm_),
                           "MPI_Gather");
         }

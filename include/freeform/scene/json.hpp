@@ -706,6 +706,14 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"coarse_rays_per_cell",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.coarse_rays_per_cell = number_in(v, p, 0, 1 << 20); },
          [](const OptimiseSpec& o, json& j) { j["coarse_rays_per_cell"] = o.coarse_rays_per_cell; }},
+        {"initial_temperature_scale",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.initial_temperature_scale = number_in(v, p, 1e-6, 1e6);
+         },
+         [](const OptimiseSpec& o, json& j) { j["initial_temperature_scale"] = o.initial_temperature_scale; }},
+        {"held_out_checks",
+         [](const json& v, const std::string& p, OptimiseSpec& o) { o.held_out_checks = boolean(v, p); },
+         [](const OptimiseSpec& o, json& j) { j["held_out_checks"] = o.held_out_checks; }},
         {"sobel_weight",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.sobel_weight = number_in(v, p, 0, 10); },
          [](const OptimiseSpec& o, json& j) { j["sobel_weight"] = o.sobel_weight; }},

@@ -82,6 +82,7 @@ struct OptimiseSpec {
     bool multilevel = true;           // false: only the final level
     int start_level = -1;             // first planned level to run; -1: decided from the start's error
     double coarse_rays_per_cell = 4;  // rays per receiver cell on levels before the last; 0: the light's
+    bool held_out_checks = true;      // judge stages with held-out rays (design/held_out.hpp)
 
     // Objective.
     double sobel_weight = 0.1;
@@ -108,6 +109,7 @@ struct OptimiseSpec {
     double initial_acceptance = 0.03;  // of uphill moves at the start of each stage
     double refine_initial_acceptance = 0.001;  // ... at most, after a transport start
     double refine_max_shift_cells = 1.0;       // largest light shift of a move after a transport start
+    double initial_temperature_scale = 1;  // multiplies every stage's calibrated initial temperature
     double cooling = 0.95;
     int temperature_steps = 120;      // cooling steps per stage
     double reheat_factor = 0.5;
