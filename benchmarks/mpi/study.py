@@ -4,7 +4,8 @@
 For each scene, seed and configuration, runs `freeform design` (1 rank x C threads) or
 `mpirun -np N freeform_mpi design` (N ranks x C/N threads; N > C oversubscribes: the
 ranks share the cores) with the same time budget, and records the final error (the
-exact tracer's, metrics.json "error") and the wall time of the whole command.
+exact tracer's, metrics.json "error", and "error_held_out" with rays the design was not
+fitted to, where the build reports it) and the wall time of the whole command.
 
     benchmarks/mpi/study.py --bin build/release/bin --cores 2 --budget 20 --seeds 1 2 3 \
         --scenes examples/scenes/camera.json examples/scenes/letter-e.json \
@@ -90,6 +91,7 @@ def main():
                     "cores_per_rank": ";".join(str(c) for c in r.get("cores_per_rank", [])),
                     "oversubscribed": ranks * threads > a.cores, "budget_s": a.budget,
                     "load1_before": round(load, 2), "wall_s": round(wall, 2), "design_s": round(m["seconds"], 2), "error": m["error"],
+                    "error_held_out": m.get("error_held_out", ""),
                     "energy": m["energy"], "start_s": round(m["start"]["seconds"], 2),
                     "iterations_winner": m["iterations"],
                     "iterations_all": r.get("iterations_all_ranks", m["iterations"]),
@@ -115,6 +117,7 @@ def read_rows(path):
         for k in ("budget_s", "load1_before", "wall_s", "design_s", "error", "energy", "start_s"):
             r[k] = float(r[k])
         r["ladder_ratio"] = float(r["ladder_ratio"]) if r["ladder_ratio"] else ""
+        r["error_held_out"] = float(r["error_held_out"]) if r.get("error_held_out") else ""
         r["oversubscribed"] = r["oversubscribed"] == "True"
         rows.append(r)
     return rows
@@ -125,22 +128,24 @@ def config_rows(rows, scene, ranks, ratio):
             (ranks == 1 or ratio is None or r["ladder_ratio"] == ratio)]
 
 
-def paired(rows, configs):
+def paired(rows, configs, key="error"):
     """Seed by seed: each configuration against the first (1 rank), and each further
-    ladder ratio against the first ratio of the same rank count."""
+    ladder ratio against the first ratio of the same rank count; compares `key`."""
     pairs = [(configs[0], c) for c in configs[1:]]
     multi = [c for c in configs if c[0] > 1]
     pairs += [(a, b) for a in multi for b in multi if a[0] == b[0] and a is not b and multi.index(a) < multi.index(b)]
     def name(c):
         threads = next((r["threads_per_rank"] for r in rows if r["ranks"] == c[0]), "?")
         return f"{c[0]} x {threads}" + ("" if c[0] == 1 or c[1] is None else f", ratio {c[1]}")
-    lines = ["", "Seed by seed (ranks x threads; same scene and seed; lower error wins):", "",
+    if any(r.get(key, "") == "" for r in rows):
+        return []
+    lines = ["", f"Seed by seed, {key} (ranks x threads; same scene and seed; lower wins):", "",
              "| scene | A | B | seeds | B lower | equal | B higher | median of B − A | median error A → B |",
              "|---|---|---|---|---|---|---|---|---|"]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for a, b in pairs:
-            ea = {r["seed"]: r["error"] for r in config_rows(rows, scene, *a)}
-            eb = {r["seed"]: r["error"] for r in config_rows(rows, scene, *b)}
+            ea = {r["seed"]: r[key] for r in config_rows(rows, scene, *a)}
+            eb = {r["seed"]: r[key] for r in config_rows(rows, scene, *b)}
             seeds = sorted(set(ea) & set(eb))
             if not seeds:
                 continue
@@ -169,6 +174,7 @@ def summarize(rows, configs, out):
                 f'{int(statistics.median(r["iterations_all"] for r in rs))} | '
                 f'{",".join(str(r["winner_rank"]) for r in rs)} | {" ".join(r["swaps"] or "-" for r in rs)} |')
     lines += paired(rows, configs)
+    lines += paired(rows, configs, "error_held_out")
     open(os.path.join(out, "summary.md"), "w").write("\n".join(lines) + "\n")
     print("\n".join(lines))
 
