@@ -362,6 +362,31 @@ TEST_CASE("same seed, same result; any thread count and speculation width, same 
     CHECK(a.value.error != b.value.error);
 }
 
+// ------------------------------------------------------------------------- calibration
+
+TEST_CASE("acceptance_temperature: uphill moves accepted with mean probability p at the returned T") {
+    using design_detail::acceptance_temperature;
+    // One size of uphill move: exp(-d / T) = p exactly.
+    CHECK(acceptance_temperature({2e-4, 2e-4, 2e-4}, 0.03) == doctest::Approx(2e-4 / -std::log(0.03)).epsilon(1e-9));
+    // Heavy-tailed sizes: the mean acceptance is p, and T is far below the old rule's
+    // mean(d) / ln(1/p), which accepted most of the small moves.
+    const std::vector<double> up{1e-7, 3e-6, 2e-5, 1e-4, 4e-4, 2e-3, 9e-3};
+    for (double p : {0.001, 0.03, 0.3}) {
+        CAPTURE(p);
+        const double t = acceptance_temperature(up, p);
+        double mean = 0, sum = 0;
+        for (double d : up) mean += std::exp(-d / t), sum += d;
+        mean /= double(up.size());
+        CHECK(mean == doctest::Approx(p).epsilon(1e-6));
+        const double old_rule = sum / double(up.size()) / -std::log(p);
+        CHECK(t < old_rule);
+        double old_mean = 0;
+        for (double d : up) old_mean += std::exp(-d / old_rule);
+        CHECK(old_mean / double(up.size()) > 2 * p);
+    }
+    CHECK(acceptance_temperature({}, 0.03) == 1e-12);  // nothing went uphill
+}
+
 // ------------------------------------------------------------------------- held-out checks
 
 TEST_CASE("held-out checks: the kept state is no worse on held-out rays than the annealer's best; reports agree") {
