@@ -556,21 +556,30 @@ int run_design(const DesignArgs& a) {
     // Final evaluation at the scene's full resolution, with the scene's seed (the rays the
     // design was fitted to) and, unless the checks are off, with the held-out rays of the
     // final level (design/held_out.hpp), which it was not fitted to.
-    const RaySet rays = generate_rays(scene.light, result.surface, scene.receiver, options.seed);
     const PathParams pp = make_path_params(scene);
-    HeightfieldTracer tracer(result.surface, rays, pp);
-    Histogram hist(scene.receiver.width, scene.receiver.height);
-    TraceTotals totals;
-    tracer.trace_all(exec::omp_t{options.threads}, hist, totals);
-    const Target t = make_target(target, scene.receiver.width, scene.receiver.height, rays.total);
+    struct Render {
+        RaySet rays;
+        Histogram hist;
+        TraceTotals totals;
+        Target scaled;  // the target scaled to these rays' total
+    };
+    const auto render = [&](std::uint64_t seed) {
+        Render r{generate_rays(scene.light, result.surface, scene.receiver, seed),
+                 Histogram(scene.receiver.width, scene.receiver.height), {}, {}};
+        HeightfieldTracer(result.surface, r.rays, pp).trace_all(exec::omp_t{options.threads}, r.hist, r.totals);
+        r.scaled = make_target(target, scene.receiver.width, scene.receiver.height, r.rays.total);
+        return r;
+    };
+    const Render fitted = render(options.seed);
+    const RaySet& rays = fitted.rays;
+    const Histogram& hist = fitted.hist;
+    const TraceTotals& totals = fitted.totals;
+    const Target& t = fitted.scaled;
     const double error = l1_error(hist, t);
     std::optional<double> error_held_out;
     if (result.held_out.total >= 0) {
-        const RaySet held = generate_rays(scene.light, result.surface, scene.receiver, result.held_out_seed);
-        Histogram h(scene.receiver.width, scene.receiver.height);
-        TraceTotals ht;
-        HeightfieldTracer(result.surface, held, pp).trace_all(exec::omp_t{options.threads}, h, ht);
-        error_held_out = l1_error(h, make_target(target, scene.receiver.width, scene.receiver.height, held.total));
+        const Render held = render(result.held_out_seed);
+        error_held_out = l1_error(held.hist, held.scaled);
     }
 
     json m;

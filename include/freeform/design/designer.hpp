@@ -338,6 +338,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
     // may then depend on measured time (see calibrate()).
     const bool timed_calibration = options.time_budget > 0 && options.max_iterations == 0;
+    const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold, options.lost_light_weight};
 
     Scene planned = scene;
     planned.optimise = options;
@@ -393,11 +394,9 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
         level_scene.receiver = receiver;
         const PathParams pp = make_path_params(level_scene);
         const double unit = design_detail::amplitude_unit(scene, receiver, surface);
-        const ObjectiveWeights level_weights{options.sobel_weight, options.energy_threshold,
-                                             options.lost_light_weight};
         std::optional<HeldOutCheck> held_out;
         if (options.held_out_checks)
-            held_out.emplace(surface, light, receiver, pp, target_image, level_weights, penalties,
+            held_out.emplace(surface, light, receiver, pp, target_image, weights, penalties,
                              HeldOutCheck::seed_for(options.seed, li), threads);
 
         const std::size_t stages = level.kernel_supports.empty() ? 1 : level.kernel_supports.size();
@@ -405,7 +404,6 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
         for (std::size_t si = 0; si < stages && !stop; ++si) {
             const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
             const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
-            const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold, options.lost_light_weight};
             // The history bandit's pre-process (reference §4.3.2): a short run with every
             // shape equally likely, then only the shapes that paid best are kept.
             if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
@@ -588,14 +586,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             if (held_out) {
                 // The annealer ends holding its best state on the fitted rays; a state
                 // the held-out rays judged better replaces it.
-                const ObjectiveValue end = (*held_out)(surface);
-                report.held_out_end = end.error;
-                if (!held_best.offer(surface, end, ar.iterations)) {
+                if (!held_best.offer(surface, (*held_out)(surface), ar.iterations)) {
                     problem.replace_heights(held_best.heights);
-                    report.held_out_end = held_best.value.error;
                     report.held_out_kept = held_best.iteration;
                 }
-                report.held_out_checks = held_out->checks();
+                report.held_out_end = held_best.value.error;
+                report.held_out_checks = held_best.checks;
             }
             total_iterations += ar.iterations;
             result.accepted += ar.accepted;
@@ -622,6 +618,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 result.kernel_bank = ps.bank;
                 result.bandit_weights = report.bandit_weights;
                 result.rays = rays.size();
+                if (held_out) result.held_out = held_best.value, result.held_out_seed = held_out->seed();
             }
         }
         share_used += level_share;
@@ -638,32 +635,23 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             final_scene.receiver = receiver;
             const RaySet rays = generate_rays(scene.light, surface, receiver, options.seed);
             const ProposalSettings ps = design_detail::proposals_for(options, 5, kept_arms);
-            Problem final_state(surface, rays, make_path_params(final_scene),
-                                         make_target(target_image, receiver.width, receiver.height, rays.total),
-                                         ObjectiveWeights{options.sobel_weight, options.energy_threshold,
-                                                          options.lost_light_weight},
-                                         penalties, ps, make_bandit("uniform", std::max<int>(1, int(ps.bank.size()))),
-                                         1.0, 1.0);
+            const PathParams final_pp = make_path_params(final_scene);
+            Problem final_state(surface, rays, final_pp,
+                                make_target(target_image, receiver.width, receiver.height, rays.total), weights,
+                                penalties, ps, make_bandit("uniform", std::max<int>(1, int(ps.bank.size()))), 1.0,
+                                1.0);
             result.irradiance = final_state.histogram();
             result.target = final_state.image().target();
             result.value = final_state.value();
             result.rays = rays.size();
+            if (options.held_out_checks) {
+                // ... and on the final level's held-out rays.
+                HeldOutCheck check(surface, scene.light, receiver, final_pp, target_image, weights, penalties,
+                                   HeldOutCheck::seed_for(options.seed, levels.size() - 1), threads);
+                result.held_out = check(surface);
+                result.held_out_seed = check.seed();
+            }
         }
-    }
-    if (options.held_out_checks) {
-        // The final design on the final level's held-out rays (the same rays as its
-        // checks): the error a user can expect from another render of this surface.
-        const LevelPlan& final_level = levels.back();
-        Receiver receiver = scene.receiver;
-        receiver.width = final_level.resolution_x;
-        receiver.height = final_level.resolution_y;
-        Scene final_scene = scene;
-        final_scene.receiver = receiver;
-        HeldOutCheck check(surface, scene.light, receiver, make_path_params(final_scene), target_image,
-                           ObjectiveWeights{options.sobel_weight, options.energy_threshold, options.lost_light_weight},
-                           penalties, HeldOutCheck::seed_for(options.seed, levels.size() - 1), threads);
-        result.held_out = check(surface);
-        result.held_out_seed = HeldOutCheck::seed_for(options.seed, levels.size() - 1);
     }
     result.surface = std::move(surface);
     result.iterations = total_iterations;

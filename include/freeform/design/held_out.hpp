@@ -45,11 +45,12 @@ public:
     HeldOutCheck(const Heightmap& surface, const Light& light, const Receiver& receiver, const PathParams& params,
                  const ImageD& target_image, ObjectiveWeights weights, const Penalties& penalties, std::uint64_t seed,
                  int threads)
-        : rays_(generate_rays(light, surface, receiver, seed)), params_(params),
+        : seed_(seed), rays_(generate_rays(light, surface, receiver, seed)), params_(params),
           image_(make_target(target_image, receiver.width, receiver.height, rays_.total)), weights_(weights),
           penalties_(&penalties), threads_(threads) {}
 
     std::int64_t rays() const { return rays_.size(); }
+    std::uint64_t seed() const { return seed_; }
 
     // Iterations between checks: a check is one full trace of the held-out rays, which
     // costs about as much as (rays / 32) incremental moves on the cases measured, so a
@@ -64,20 +65,17 @@ public:
         TraceTotals totals;
         tracer.trace_all(exec::omp_t{threads_}, h, totals);
         image_.reset(h);
-        ++checks_;
         return combine(image_.sums(), rays_.total, Penalties::value(penalties_->full(surface), surface), weights_);
     }
 
-    std::int64_t checks() const { return checks_; }
-
 private:
+    std::uint64_t seed_;
     RaySet rays_;
     PathParams params_;
     ImageState image_;
     ObjectiveWeights weights_;
     const Penalties* penalties_;
     int threads_;
-    std::int64_t checks_ = 0;
 };
 
 // The best state seen by held-out checks during one stage.
@@ -85,9 +83,10 @@ struct HeldOutBest {
     ObjectiveValue value;          // held-out objective of `heights`
     std::vector<float> heights;    // empty until the first check
     std::int64_t iteration = -1;   // stage iteration of the check (0 = the stage's start)
-    bool empty() const { return heights.empty(); }
+    std::int64_t checks = 0;       // states offered
     // Keeps `surface` when its held-out objective beats the best so far.
     bool offer(const Heightmap& surface, const ObjectiveValue& v, std::int64_t it) {
+        ++checks;
         if (!heights.empty() && !(v.total < value.total)) return false;
         value = v;
         heights = surface.heights();

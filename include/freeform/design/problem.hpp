@@ -189,12 +189,11 @@ public:
     // Puts the best state seen back in place (if the current one is worse).
     void restore_best() {
         if (best_is_current_ || best_heights_.empty()) return;
-        surface_->set_heights(best_heights_);
-        backend_.committed(surface_->full_patch());
-        rebuild();
+        replace_heights(best_heights_);
     }
 
-    // Sets the surface to `heights` (same mesh) and recomputes everything from them.
+    // Sets the surface to `heights` (same mesh) and recomputes everything from them; the
+    // state is then its own best. (`heights` may be best_heights_: they are copied first.)
     void replace_heights(const std::vector<float>& heights) {
         surface_->set_heights(heights);
         backend_.committed(surface_->full_patch());
