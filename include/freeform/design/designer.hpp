@@ -296,8 +296,8 @@ struct Calibration {
 // so that T accepted most small uphill moves: from a transport start every stage first
 // drifted up (letter E: error 0.0426 -> 0.0527 in its first stage, which then ended
 // where it began) and spent most of its iterations coming back down. The acceptance
-// ratio rule starts 10 to 10^5 times colder; at equal iterations every case ended
-// 12-40 % lower (benchmarks/results/calibration). The temperature still sets the move
+// ratio rule started 11 to 300,000 times colder on the example cases; at equal
+// iterations every case ended 7-40 % lower (benchmarks/results/calibration). The temperature still sets the move
 // amplitudes (ProposalSettings), which it scales from this reference.
 //
 // With `timed`, slow moves cut the trials short (a time-budgeted run must not spend its
