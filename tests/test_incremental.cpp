@@ -274,3 +274,39 @@ TEST_CASE("the Embree backend keeps the same invariant, refitting only touched t
     }
 }
 #endif
+
+TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's reach; the whole mesh changes nothing") {
+    for (const bool guided : {false, true}) {
+        CAPTURE(guided);
+        const auto all = cases();
+        Setup s = make_setup(all.front());
+        ProposalSettings ps = proposals();
+        ps.error_guided = guided;
+        ReflectorProblem strip(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        ReflectorProblem whole(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        ReflectorProblem plain(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        strip.set_centre_rows(10, 20);
+        whole.set_centre_rows(0, s.hm.ny());
+        const int reach = 5 / 2;  // default_kernel_bank(5): 5 × 5 vertices around the centre
+        int lowest = s.hm.ny(), highest = -1;
+        ReflectorProblem::Move a, b, p;
+        bool same = true;
+        for (std::uint64_t it = 0; it < 2000; ++it) {
+            CounterRng r1(91, it), r2(91, it), r3(91, it);
+            strip.propose(r1, 1.0, a);
+            whole.propose(r2, 1.0, b);
+            plain.propose(r3, 1.0, p);
+            same = same && b.overlay.patch.i0 == p.overlay.patch.i0 && b.overlay.patch.j0 == p.overlay.patch.j0 &&
+                   b.overlay.patch.i1 == p.overlay.patch.i1 && b.overlay.patch.j1 == p.overlay.patch.j1 &&
+                   b.overlay.heights == p.overlay.heights;
+            if (a.noop) continue;
+            lowest = std::min(lowest, a.overlay.patch.j0);
+            highest = std::max(highest, a.overlay.patch.j1);
+        }
+        CHECK(same);  // the whole mesh as the strip draws exactly the moves of no strip
+        CHECK(lowest >= 10 - reach);
+        CHECK(highest <= 19 + reach);
+        CHECK(lowest <= 10);  // the strip's edge rows are drawn as centres
+        CHECK(highest >= 19);
+    }
+}

@@ -43,6 +43,9 @@ def main():
     ap.add_argument("--ladder-ratios", type=float, nargs="+", default=None,
                     help="run each multi-rank configuration at each of these ratios")
     ap.add_argument("--exchange-every", type=int, default=None, help="freeform_mpi --exchange-every")
+    ap.add_argument("--replica-mode", choices=["tempering", "domains"], default=None,
+                    help="freeform_mpi --replica-mode (default: freeform_mpi's)")
+    ap.add_argument("--merge-coverage", type=float, default=None, help="freeform_mpi --merge-coverage")
     ap.add_argument("--summary-only", action="store_true",
                     help="run nothing: write summary.md from the runs.csv already in --out")
     a = ap.parse_args()
@@ -75,6 +78,10 @@ def main():
                         cmd += ["--ladder-ratio", str(ratio)]
                     if a.exchange_every is not None:
                         cmd += ["--exchange-every", str(a.exchange_every)]
+                    if a.replica_mode is not None:
+                        cmd += ["--replica-mode", a.replica_mode]
+                    if a.merge_coverage is not None:
+                        cmd += ["--merge-coverage", str(a.merge_coverage)]
                 load = os.getloadavg()[0]  # other work on the machine when the run started
                 t0 = time.monotonic()
                 p = subprocess.run(cmd, capture_output=True, text=True)
@@ -87,6 +94,7 @@ def main():
                 pairs = r.get("pairs", [])
                 row = {
                     "scene": name, "seed": seed, "ranks": ranks, "threads_per_rank": threads,
+                    "mode": r.get("mode", ""), "merges": r.get("merges", ""),
                     "ladder_ratio": r.get("ladder_ratio", ""),
                     "cores_per_rank": ";".join(str(c) for c in r.get("cores_per_rank", [])),
                     "oversubscribed": ranks * threads > a.cores, "budget_s": a.budget,
@@ -96,7 +104,8 @@ def main():
                     "iterations_winner": m["iterations"],
                     "iterations_all": r.get("iterations_all_ranks", m["iterations"]),
                     "winner_rank": r.get("winner_rank", 0),
-                    "swaps": ";".join(f'{p["accepted"]}/{p["proposed"]}' for p in pairs),
+                    "swaps": (";".join(f'{p["accepted"]}/{p["proposed"]}' for p in pairs) or
+                              (f'{r["merges"]} merges' if r.get("mode") == "domains" else "")),
                 }
                 shutil.rmtree(out, ignore_errors=True)  # the camera's outputs are megabytes a run
                 rows.append(row)
@@ -157,7 +166,7 @@ def paired(rows, configs, key="error"):
 
 
 def summarize(rows, configs, out):
-    lines = ["| scene | ranks x threads | ladder ratio | runs | median error | errors (by seed) | median wall s | median start s | median iterations (all ranks) | winner ranks | swaps accepted/proposed |",
+    lines = ["| scene | ranks x threads | ladder ratio | runs | median error | errors (by seed) | median wall s | median start s | median iterations (all ranks) | winner ranks | swaps accepted/proposed (domains: merges) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for ranks, ratio in configs:

@@ -408,8 +408,10 @@ struct DesignArgs {
     std::optional<int> threads;
     bool quiet = false;
     bool start_only = false;
+    std::string replica_mode = "tempering";  // freeform_mpi only
     double ladder_ratio = 1.5;        // freeform_mpi only
-    std::int64_t exchange_every = 500;  // freeform_mpi only
+    std::int64_t exchange_every = 0;  // freeform_mpi only; 0 = automatic
+    double merge_coverage = 10;       // freeform_mpi only
 };
 
 #if defined(FREEFORM_WITH_MPI)
@@ -496,8 +498,10 @@ int run_design(const DesignArgs& a) {
     DesignResult result;
 #if defined(FREEFORM_WITH_MPI)
     mpi::ReplicaOptions replica_options;
+    replica_options.mode = mpi::parse_replica_mode(a.replica_mode, "--replica-mode");
     replica_options.ladder_ratio = a.ladder_ratio;
     replica_options.exchange_every = a.exchange_every;
+    replica_options.merge_coverage = a.merge_coverage;
     mpi::validate(replica_options);
     mpi::Replicas replicas(MPI_COMM_WORLD, options.seed, replica_options);
     const RankLayout layout = rank_layout(thread_count(exec::omp_t{options.threads}));
@@ -539,6 +543,8 @@ int run_design(const DesignArgs& a) {
         result = design(scene, std::move(initial), target, run_options, progress, default_penalties(run_options),
                         replicas);
         iterations_all = replicas.sum_on_root(result.iterations);
+        // Ranks that share one surface all worked on the design: its moves are theirs.
+        if (replicas.shares_surface() && world_rank == 0) result.iterations = iterations_all;
         winner = replicas.gather_best(result, &replica_objectives);
 #else
         result = design(scene, std::move(initial), target, run_options, progress);
@@ -617,24 +623,43 @@ int run_design(const DesignArgs& a) {
     {
         json r;
         r["ranks"] = world_size;
-        r["ladder"] = "geometric";
-        r["ladder_ratio"] = replica_options.ladder_ratio;
-        json scales = json::array();
-        for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
-        r["rung_temperature_scales"] = scales;
-        r["exchange"] = "temperatures";
-        r["exchange_every"] = replica_options.exchange_every;
+        r["mode"] = mpi::to_string(replica_options.mode);
+        const bool domains = replica_options.mode == mpi::ReplicaMode::domains;
+        if (domains) {
+            r["exchange"] = "surfaces: every rank's changes since the last merge are added up";
+            r["merges"] = replicas.merges();
+            json rows = json::array();
+            for (int k = 0; k < world_size; ++k)
+                rows.push_back(json::array({double(k) / world_size, double(k + 1) / world_size}));
+            r["rows_per_rank"] = rows;  // fractions of the mesh's rows each rank moves
+        } else {
+            r["ladder"] = "geometric";
+            r["ladder_ratio"] = replica_options.ladder_ratio;
+            json scales = json::array();
+            for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
+            r["rung_temperature_scales"] = scales;
+            r["exchange"] = "temperatures";
+        }
+        if (replica_options.exchange_every > 0)
+            r["exchange_every"] = replica_options.exchange_every;
+        else
+            r["exchange_every"] = domains ? "automatic: merge_coverage x (mesh vertices / ranks) / kernel support^2, "
+                                            "at least 500"
+                                          : "automatic: 500";
+        if (domains) r["merge_coverage"] = replica_options.merge_coverage;
         r["exchange_points"] = replicas.exchange_points();
-        json pairs = json::array();
-        for (const auto& p : replicas.pairs())
-            pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
-                             {"proposed", p.proposed},
-                             {"accepted", p.accepted},
-                             {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
-        r["pairs"] = pairs;
         r["winner_rank"] = winner;
-        r["winner_final_rung"] = replicas.rungs()[std::size_t(winner)];
-        r["final_rungs"] = replicas.rungs();
+        if (!domains) {
+            json pairs = json::array();
+            for (const auto& p : replicas.pairs())
+                pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
+                                 {"proposed", p.proposed},
+                                 {"accepted", p.accepted},
+                                 {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
+            r["pairs"] = pairs;
+            r["winner_final_rung"] = replicas.rungs()[std::size_t(winner)];
+            r["final_rungs"] = replicas.rungs();
+        }
         r["objectives"] = replica_objectives;  // what picked the winner: held-out when checked
         r["objectives_judged_on"] = result.held_out.total >= 0 ? "held-out rays" : "fitted rays";
         r["iterations_all_ranks"] = iterations_all;
@@ -773,12 +798,22 @@ int cli_main(int argc, char** argv) {
     design_cmd->add_flag("--start-only", da.start_only,
                          "write the start surface alone (the transport surface by default), without annealing");
 #if defined(FREEFORM_WITH_MPI)
+    design_cmd->add_option("--replica-mode", da.replica_mode,
+                           "tempering: each rank a replica of the design at its own temperature, the best one wins "
+                           "(default); domains: the ranks share one design, each moving a strip of the mesh, merged "
+                           "at exchange points");
     design_cmd->add_option("--ladder-ratio", da.ladder_ratio,
                            "replica exchange: temperature scale of rung k is RATIO^k (default 1.5)")
         ->check(CLI::Range(1.0, 1e6));
     design_cmd->add_option("--exchange-every", da.exchange_every,
-                           "replica exchange: iterations between exchanges (default 500)")
-        ->check(CLI::Range(std::int64_t{1}, std::numeric_limits<std::int64_t>::max()));
+                           "iterations between exchanges (tempering) or merges (domains); 0 = automatic (default): "
+                           "500 for tempering, for domains as many as move each vertex of a rank's strip about "
+                           "--merge-coverage times")
+        ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
+    design_cmd->add_option("--merge-coverage", da.merge_coverage,
+                           "domains: moves per vertex of a strip between merges, when --exchange-every is 0 "
+                           "(default 10)")
+        ->check(CLI::Range(1e-3, 1e6));
 #endif
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");

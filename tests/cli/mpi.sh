@@ -8,6 +8,9 @@
 #    metrics.json records each rank's threads and cores; rank 0 warns exactly when a
 #    rank has more threads than the cores mpirun bound it to
 # 5. a rank that dies ends the run non-zero, with no metrics.json or surface files
+# 6. domains (--replica-mode domains): -np 1 == freeform design bit for bit; -np 2 twice
+#    gives identical files, and 2 ranks x 2 threads the same as 2 x 1; metrics.json
+#    records the mode, the merges and the moves of both ranks; a bad mode exits 2
 set -uo pipefail
 freeform=$1 freeform_mpi=$2 mpiexec=$3 scene=$4 work=$5
 # Root in CI containers, and more ranks than cores on small machines.
@@ -89,6 +92,48 @@ for d in sys.argv[1:]:
                                                         ", warned" if warned else ""))
 PY
 [ $failures -eq $before ] && echo "ok   2 ranks x 2 threads (bound and unbound) == 2 ranks x 1 thread, bit for bit"
+
+# Domains: the ranks share one design, each moving a strip of the mesh.
+before=$failures
+"${mpirun[@]}" -np 1 "$freeform_mpi" design "$scene" --out dom1 --threads 1 --quiet --replica-mode domains \
+    >dom1.log 2>&1 || fail "domains -np 1: $(cat dom1.log)"
+for f in "${files[@]}"; do
+    cmp -s "plain/$f" "dom1/$f" || fail "domains np 1: $f differs from the non-MPI design"
+done
+for run in a b; do
+    "${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out "dom2$run" --threads 1 --quiet \
+        --replica-mode domains --exchange-every 150 >"dom2$run.log" 2>&1 || fail "domains -np 2: $(cat "dom2$run.log")"
+done
+"${mpirun[@]}" --bind-to none -np 2 "$freeform_mpi" design "$scene" --out dom2t2 --threads 2 --quiet \
+    --replica-mode domains --exchange-every 150 >dom2t2.log 2>&1 || fail "domains -np 2 --threads 2: $(cat dom2t2.log)"
+for d in dom2b dom2t2; do
+    for f in "${files[@]}"; do
+        cmp -s "dom2a/$f" "$d/$f" || fail "domains: $d/$f differs from the first 2-rank run"
+    done
+done
+python3 - dom2a/metrics.json plain/metrics.json <<'PY' || fail "domains: metrics.json"
+import json, sys
+m = json.load(open(sys.argv[1]))
+plain = json.load(open(sys.argv[2]))
+r = m["replicas"]
+assert r["ranks"] == 2 and r["mode"] == "domains", r
+assert r["rows_per_rank"] == [[0, 0.5], [0.5, 1]], r
+assert r["merges"] >= 5 and "pairs" not in r, r  # design-tiny: 2000 iterations a rank in 3 stages, merges every 150
+assert r["iterations_all_ranks"] == 4000 and m["iterations"] == 4000, (r, m["iterations"])
+assert all(l.get("merges", 0) >= 1 for l in m["levels"]), m["levels"]
+assert r["winner_rank"] == 0, r  # every rank ends on the same surface
+# Twice the moves of the plain design (the same iterations a rank) and a sane result.
+assert 0 < m["error"] < m["start"]["error"] or m["error"] < 2 * plain["error"], (m["error"], plain["error"])
+print("ok   domains metrics.json: %d merges, %d moves in all, error %.4f (plain design %.4f)"
+      % (r["merges"], m["iterations"], m["error"], plain["error"]))
+PY
+"${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out dombad --threads 1 --quiet --replica-mode tiles \
+    >dombad.log 2>&1
+rc=$?
+[ $rc -eq 2 ] || fail "--replica-mode tiles: exit code $rc, not 2"
+grep -q -- "--replica-mode" dombad.log || fail "--replica-mode tiles: the message does not name the option: $(cat dombad.log)"
+[ ! -e dombad/metrics.json ] || fail "--replica-mode tiles: metrics.json written"
+[ $failures -eq $before ] && echo "ok   domains: np 1 == freeform design; np 2 reproducible, threads change nothing; bad mode exits 2"
 
 FREEFORM_TEST_ABORT_RANK=1 "${mpirun[@]}" -x FREEFORM_TEST_ABORT_RANK -np 2 "$freeform_mpi" design "$scene" \
     --out dead --threads 1 --quiet >dead.log 2>&1

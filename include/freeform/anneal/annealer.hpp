@@ -68,6 +68,10 @@
 //                                 by (re-heats included). This is the hook of replica
 //                                 exchange (freeform/mpi/): replicas at a ladder of scales
 //                                 swap their temperatures; nothing here knows about them.
+//                                 It may also replace the problem's state (domain
+//                                 decomposition: replicas merge their surfaces) and say
+//                                 so with state_replaced: the run then goes on from the
+//                                 problem's new energy, which is also its new best.
 // A hook that returns a value convertible to bool stops the run after that point when
 // it returns true (end's value is ignored). Every callback is called in the order given,
 // even when an earlier one asked to stop.
@@ -169,6 +173,9 @@ struct AnnealState {
 struct AnnealExchange {
     AnnealState state;               // state.temperature: the next iteration's, scale included
     double temperature_scale = 1.0;  // in: the current scale; out: the scale from now on (> 0)
+    // out: the hook replaced the problem's state (heights); its energy is re-read and
+    // becomes the run's best (the problem's own best copy is the hook's business).
+    bool state_replaced = false;
 };
 
 // What happened since the previous sync/batch point.
@@ -692,6 +699,10 @@ private:
             if (x.temperature_scale != scale_) {
                 scale_ = x.temperature_scale;
                 cached_step_ = -1;
+            }
+            if (x.state_replaced) {
+                energy_ = static_cast<double>(problem_.energy());
+                best_ = energy_;
             }
         }
 

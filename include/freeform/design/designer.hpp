@@ -64,6 +64,7 @@ struct StageReport {
     std::int64_t held_out_checks = 0;
     std::int64_t held_out_kept = -1;  // stage iteration of the state kept instead of the
                                       // annealer's best (-1: the annealer's best was kept)
+    std::int64_t merges = 0;  // replicas sharing one surface: merges made (replicas.hpp)
 };
 
 struct ConvergencePoint {
@@ -444,6 +445,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                                                                   timed_calibration);
             const double t0 = replicas.common_temperature(cal.temperature * options.initial_temperature_scale);  // identity for one replica
             problem.set_reference_temperature(t0);
+            // Replicas that share one surface each move their own strip of it (after the
+            // calibration, which every replica makes on the whole surface alike).
+            if (replicas.shares_surface()) {
+                const auto [j0, j1] = replicas.centre_rows(surface.ny());
+                problem.set_centre_rows(j0, j1);
+            }
 
             StageReport report;
             report.level = int(li);
@@ -505,7 +512,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 ao.time_budget = 0;
                 ao.target_energy = std::numeric_limits<double>::quiet_NaN();
                 ao.temperature_scale = replicas.stage_temperature_scale();
-                ao.exchange_every = std::max<std::int64_t>(1, replicas.exchange_every());
+                ao.exchange_every = std::max<std::int64_t>(1, replicas.exchange_every(level.mesh_x, level.mesh_y, support));
             }
 
             const auto stage_start = elapsed();
@@ -525,12 +532,31 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 HeldOutCheck* held_out = nullptr;  // set when held-out checks are on
                 HeldOutBest* held_best = nullptr;
                 std::int64_t next_check = 0;
+                // Replicas sharing one surface: the heights of the last merge, and when.
+                std::vector<float> merge_base = {};
+                std::int64_t merged_at = 0;
+                std::int64_t merges = 0;
                 // Held-out checks at the first sync point past each interval: sync points
                 // are fixed iterations, so the checks do not change the run's course.
+                // Replicas that share a surface check only merged states (the same on
+                // every replica), at merges.
                 void batch(const BatchStats& b) {
-                    if (!held_out || b.iteration < next_check) return;
-                    held_best->offer(problem->surface(), (*held_out)(problem->surface()), b.iteration);
-                    next_check = b.iteration + held_out->interval();
+                    if (!held_out || b.iteration < next_check || (replicas && replicas->shares_surface())) return;
+                    check_held_out(b.iteration);
+                }
+                void check_held_out(std::int64_t iteration) {
+                    held_best->offer(problem->surface(), (*held_out)(problem->surface()), iteration);
+                    next_check = iteration + held_out->interval();
+                }
+                // Every replica's changes since the last merge, on every replica.
+                void merge(std::int64_t iteration, bool check = true) {
+                    std::vector<float> h = problem->surface().heights();
+                    replicas->merge(h, merge_base);
+                    problem->replace_heights(h);
+                    merge_base = problem->surface().heights();
+                    merged_at = iteration;
+                    ++merges;
+                    if (check && held_out && iteration >= next_check) check_held_out(iteration);
                 }
                 bool exchange(AnnealExchange& x) {
                     if (!replicas) return false;
@@ -543,6 +569,10 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                    (target > 0 && x.state.best_energy <= target);
                     const bool stop_all = replicas->exchange(r);
                     x.temperature_scale = r.temperature_scale;
+                    if (replicas->shares_surface()) {
+                        merge(x.state.iteration);
+                        x.state_replaced = true;
+                    }
                     return stop_all;
                 }
                 bool progress(const AnnealState& s) {
@@ -580,9 +610,16 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 hooks.replicas = &replicas;
                 hooks.stage_deadline = options.time_budget > 0 ? elapsed() + stage_time : 0;
                 hooks.target = options.target_error;
+                if (replicas.shares_surface()) hooks.merge_base = surface.heights();
             }
 
             const AnnealResult ar = anneal(problem, ao, hooks);
+            // Sharing replicas end the stage on one surface: each holds its best since the
+            // last merge, and these are merged (unless nothing ran since; every replica
+            // ran the same iterations, so all decide alike).
+            if (replicas.shares_surface() && hooks.merged_at != ar.iterations)
+                hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
+            report.merges = hooks.merges;
             if (held_out) {
                 // The annealer ends holding its best state on the fitted rays; a state
                 // the held-out rays judged better replaces it.

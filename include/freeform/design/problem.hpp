@@ -105,6 +105,13 @@ public:
 
     double energy() const { return value_.total; }
     const ObjectiveValue& value() const { return value_; }
+    // Moves are centred only on the mesh rows [j0, j1) (domain decomposition: replicas
+    // that share one surface each move their own strip; design/replicas.hpp). The whole
+    // mesh by default; a strip the mesh does not have is clipped to it.
+    void set_centre_rows(int j0, int j1) {
+        row0_ = std::clamp(j0, 0, surface_->ny() - 1);
+        row1_ = std::clamp(j1, row0_ + 1, surface_->ny());
+    }
     const Heightmap& surface() const { return *surface_; }
     const IncrementalTrace& trace() const { return trace_; }
     const ImageState& image() const { return image_; }
@@ -217,13 +224,14 @@ private:
                     const double u = o.x + t * d.x, v = o.y + t * d.y;
                     ci = std::clamp(int(std::lround((u / surface_->size().x + 0.5) * (nx - 1))), 0, nx - 1);
                     cj = std::clamp(int(std::lround((v / surface_->size().y + 0.5) * (ny - 1))), 0, ny - 1);
-                    return;
+                    if (cj >= row0_ && cj < rows_end()) return;
                 }
             }
         }
         ci = int(rng.below(std::uint64_t(nx)));
-        cj = int(rng.below(std::uint64_t(ny)));
+        cj = row0_ + int(rng.below(std::uint64_t(rows_end() - row0_)));
     }
+    int rows_end() const { return row1_ < 0 ? surface_->ny() : row1_; }
 
     double cell_error(const RayRecord& r) const {
         const int x = std::min(int(r.px), image_.width() - 1), y = std::min(int(r.py), image_.height() - 1);
@@ -257,6 +265,7 @@ private:
     bool best_is_current_ = true;
     std::vector<float> best_heights_;
     double max_error_ = 0;
+    int row0_ = 0, row1_ = -1;  // centre rows [row0_, row1_); -1: to the last row
 };
 
 using ReflectorProblem = BasicReflectorProblem<HeightfieldBackend>;

@@ -23,7 +23,9 @@
 //                                       replica minimises the same function)
 //   double stage_temperature_scale()    the temperature scale a stage starts at (its rung
 //                                       of the ladder)
-//   std::int64_t exchange_every() const iterations between exchange points (> 0)
+//   std::int64_t exchange_every(int nx, int ny, int support) const
+//                                       iterations between exchange points (> 0) in a stage
+//                                       on an nx × ny mesh with kernels of `support` vertices
 //   double common_temperature(double)   the initial temperature every replica uses
 //   std::int64_t common_budget(std::int64_t)
 //                                       the iteration budget every replica uses
@@ -31,6 +33,19 @@
 //   bool exchange(ReplicaExchange&)     at an exchange point, on every replica at once:
 //                                       may change temperature_scale; true = every
 //                                       replica stops the stage here
+//   bool shares_surface() const         true: the replicas are not copies but parts of one
+//                                       design (domain decomposition): each moves only the
+//                                       mesh rows centre_rows() gives it, and at every
+//                                       exchange point, and at the end of every stage, they
+//                                       merge their surfaces (merge) and all go on from the
+//                                       merged one
+//   std::pair<int, int> centre_rows(int ny) const
+//                                       the rows [j0, j1) of an ny-row mesh this replica
+//                                       centres its moves on (all of them unless sharing)
+//   void merge(std::vector<float>& heights, const std::vector<float>& base)
+//                                       in: this replica's heights; out: the merged ones,
+//                                       the same on every replica: base plus every
+//                                       replica's change since base (the last merge)
 // When active, the designer makes every decision that could end a stage at different
 // iterations on different replicas a common one: the stage's time limit, a target error
 // and a stop asked by the progress callback are checked at exchange points and passed
@@ -41,6 +56,8 @@
 #include <concepts>
 #include <cstdint>
 #include <functional>
+#include <utility>
+#include <vector>
 
 #include "start.hpp"
 
@@ -60,25 +77,32 @@ struct SingleReplica {
     SharedStart share_start(const std::function<SharedStart()>& make) const { return make(); }
     std::uint64_t anneal_seed(std::uint64_t stage_seed) const { return stage_seed; }
     double stage_temperature_scale() const { return 1.0; }
-    std::int64_t exchange_every() const { return 0; }
+    std::int64_t exchange_every(int, int, int) const { return 0; }
     double common_temperature(double t) const { return t; }
     std::int64_t common_budget(std::int64_t b) const { return b; }
     bool any(bool b) const { return b; }
     bool exchange(ReplicaExchange& x) const { return x.local_stop; }
+    bool shares_surface() const { return false; }
+    std::pair<int, int> centre_rows(int ny) const { return {0, ny}; }
+    void merge(std::vector<float>&, const std::vector<float>&) const {}
 };
 
 template <class C>
 concept ReplicaCoordinator = requires(C& c, const C& cc, std::uint64_t seed, double t, std::int64_t b, bool f,
-                                      ReplicaExchange& x, const std::function<SharedStart()>& make) {
+                                      ReplicaExchange& x, const std::function<SharedStart()>& make,
+                                      std::vector<float>& heights, int ny) {
     { cc.active() } -> std::convertible_to<bool>;
     { c.share_start(make) } -> std::same_as<SharedStart>;
     { c.anneal_seed(seed) } -> std::convertible_to<std::uint64_t>;
     { c.stage_temperature_scale() } -> std::convertible_to<double>;
-    { cc.exchange_every() } -> std::convertible_to<std::int64_t>;
+    { cc.exchange_every(ny, ny, ny) } -> std::convertible_to<std::int64_t>;
     { c.common_temperature(t) } -> std::convertible_to<double>;
     { c.common_budget(b) } -> std::convertible_to<std::int64_t>;
     { c.any(f) } -> std::convertible_to<bool>;
     { c.exchange(x) } -> std::convertible_to<bool>;
+    { cc.shares_surface() } -> std::convertible_to<bool>;
+    { cc.centre_rows(ny) } -> std::same_as<std::pair<int, int>>;
+    c.merge(heights, heights);
 };
 static_assert(ReplicaCoordinator<SingleReplica>);
 

@@ -32,6 +32,7 @@ inline nlohmann::json stage_report_json(const StageReport& s) {
                          {"error_end", s.held_out_end},
                          {"checks", s.held_out_checks},
                          {"kept_iteration", s.held_out_kept}};
+    if (s.merges > 0) j["merges"] = s.merges;
     return j;
 }
 

@@ -1,7 +1,8 @@
 #pragma once
 // Replica-exchange annealing over MPI: one replica of the design per rank (CMake target
-// freeform::mpi, built only where MPI is found). The annealer and the designer stay free
-// of MPI; this file is the coordinator they are given (design/replicas.hpp).
+// freeform::mpi, built only where MPI is found), or one design shared by the ranks
+// (domains, below). The annealer and the designer stay free of MPI; this file is the
+// coordinator they are given (design/replicas.hpp).
 //
 // The method ("parallel tempering"). Rank r anneals its own copy of the design with its
 // own random streams (rank 0 with exactly the streams of a plain design), at the
@@ -52,6 +53,31 @@
 // for bit (the exchange points only split the annealer's windows, which does not change
 // its trajectory).
 //
+// Domains (ReplicaMode::domains). Tempering pays only where annealing must escape local
+// minima; ours, from a transport start and a calibrated, near-greedy schedule, rarely
+// must, and n replicas then do n times the work for one design's worth of progress
+// (benchmarks/results/mpi_v3). In this mode the ranks are not copies but parts of one
+// design: rank r centres its moves on the mesh rows [r·ny/n, (r+1)·ny/n) (a kernel
+// reaches support/2 rows beyond), with its own random streams, and at every exchange
+// point every rank's change since the last merge is added to the merged surface:
+//
+//   merged = base + Σ_r (h_r − base),
+//
+// in double, in rank order, then rounded and clamped once (Heightmap::set_heights), so
+// every rank computes the same floats. Moves are additive bumps, so the merge is the
+// composition of every rank's accepted moves; each rank judged its moves against the
+// others' surface as of the last merge, which is what keeps merges frequent: the
+// automatic interval moves each vertex of a strip about merge_coverage times (10 by
+// default) between merges, N = merge_coverage · (nx·ny/n) / support², at least 500
+// iterations; a merge costs one full retrace per rank (the state is rebuilt from the
+// merged heights), about as much as nx·ny/support² moves, so the overhead is about
+// 1/merge_coverage of a move-bound stage. After a merge each rank's annealer goes on
+// from the merged state, which is also its new best (AnnealExchange::state_replaced);
+// a stage ends with one more merge of the ranks' best states, so all ranks start the
+// next stage, and end the design, on the same surface bit for bit, and the held-out
+// checks judge merged states only. The ranks do n times the moves of one rank per
+// second of wall time, without the per-move synchronisation threads need.
+//
 // Failure: a rank that dies makes the others wait in the next collective until the MPI
 // runtime ends the job (Open MPI's mpirun kills every rank and exits non-zero, naming
 // the rank); nothing here writes files, so a caller that writes only after gather_best
@@ -70,6 +96,7 @@
 #include <string>
 #include <thread>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "../core/rng.hpp"
@@ -78,16 +105,36 @@
 
 namespace freeform::mpi {
 
+// What the ranks are to each other: replicas of the whole design at a ladder of
+// temperatures that swap temperatures (tempering), or workers on strips of one design
+// that merge their surfaces (domains; see "Domains" at the top).
+enum class ReplicaMode { tempering, domains };
+
+inline const char* to_string(ReplicaMode m) { return m == ReplicaMode::domains ? "domains" : "tempering"; }
+
+inline ReplicaMode parse_replica_mode(const std::string& s, const std::string& what) {
+    if (s == "tempering") return ReplicaMode::tempering;
+    if (s == "domains") return ReplicaMode::domains;
+    throw InputError(what + ": expected \"tempering\" or \"domains\", got \"" + s + "\"");
+}
+
 struct ReplicaOptions {
-    double ladder_ratio = 1.5;          // scale of rung k = ladder_ratio^k; ≥ 1
-    std::int64_t exchange_every = 500;  // iterations between exchange points; ≥ 1
+    ReplicaMode mode = ReplicaMode::tempering;
+    double ladder_ratio = 1.5;          // tempering: scale of rung k = ladder_ratio^k; ≥ 1
+    // Iterations between exchange points (domains: merges); 0 = automatic: 500 for
+    // tempering; for domains, as many as move each vertex of a rank's strip about
+    // merge_coverage times (see "Domains" above).
+    std::int64_t exchange_every = 0;
+    double merge_coverage = 10;
 };
 
 inline void validate(const ReplicaOptions& o) {
     if (!std::isfinite(o.ladder_ratio) || o.ladder_ratio < 1)
         throw InputError("replicas: ladder_ratio must be a finite number ≥ 1, got " + std::to_string(o.ladder_ratio));
-    if (o.exchange_every < 1)
-        throw InputError("replicas: exchange_every must be ≥ 1, got " + std::to_string(o.exchange_every));
+    if (o.exchange_every < 0)
+        throw InputError("replicas: exchange_every must be ≥ 0 (0 = automatic), got " + std::to_string(o.exchange_every));
+    if (!std::isfinite(o.merge_coverage) || o.merge_coverage <= 0)
+        throw InputError("replicas: merge_coverage must be a finite number > 0, got " + std::to_string(o.merge_coverage));
 }
 
 // Swap statistics of the rung pair (k, k+1).
@@ -190,6 +237,7 @@ inline std::vector<char> pack_result(const DesignResult& r) {
         p.put(s.seconds), p.put(s.initial_temperature), p.put(s.error_start), p.put(s.error_end);
         p.put(s.energy_end), p.put(s.objective_end), p.put(s.rays);
         p.put(s.held_out_start), p.put(s.held_out_end), p.put(s.held_out_checks), p.put(s.held_out_kept);
+        p.put(s.merges);
         p.put_vector(s.bandit_weights);
         p.put_string(s.stop_reason);
     }
@@ -229,6 +277,7 @@ inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
         s.rays = u.get<std::int64_t>();
         s.held_out_start = u.get<double>(), s.held_out_end = u.get<double>();
         s.held_out_checks = u.get<std::int64_t>(), s.held_out_kept = u.get<std::int64_t>();
+        s.merges = u.get<std::int64_t>();
         s.bandit_weights = u.get_vector<double>();
         s.stop_reason = u.get_string();
     }
@@ -379,8 +428,17 @@ public:
     std::uint64_t anneal_seed(std::uint64_t stage_seed) const {
         return rank_ == 0 ? stage_seed : hash_combine(stage_seed, detail::replica_stream + std::uint64_t(rank_));
     }
-    double stage_temperature_scale() const { return rung_scale(rung_[std::size_t(rank_)]); }
-    std::int64_t exchange_every() const { return options_.exchange_every; }
+    double stage_temperature_scale() const {
+        return shares_surface() ? 1.0 : rung_scale(rung_[std::size_t(rank_)]);
+    }
+    std::int64_t exchange_every(int nx, int ny, int support) const {
+        if (options_.exchange_every > 0) return options_.exchange_every;
+        if (!shares_surface()) return 500;
+        // A move changes about support² vertices; a rank's strip has nx·ny/ranks.
+        const double strip = double(nx) * double(ny) / double(size_);
+        const double footprint = double(std::max(1, support)) * double(std::max(1, support));
+        return std::max<std::int64_t>(500, std::llround(options_.merge_coverage * strip / footprint));
+    }
     double common_temperature(double t) const {
         detail::check(MPI_Bcast(&t, 1, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
         return t;
@@ -408,7 +466,7 @@ public:
         bool stop = false;
         for (int r = 0; r < size_; ++r) stop = stop || all_[std::size_t(4 * r + 3)] != 0;
         const std::int64_t point = points_++;
-        if (stop || size_ < 2) return stop;
+        if (stop || size_ < 2 || options_.mode == ReplicaMode::domains) return stop;
 
         std::vector<int> at_rung(static_cast<std::size_t>(size_));
         for (int r = 0; r < size_; ++r) at_rung[std::size_t(rung_[std::size_t(r)])] = r;
@@ -433,6 +491,33 @@ public:
         }
         return false;
     }
+
+    // Domains: rank r moves rows [r ny / n, (r + 1) ny / n); merges add up every rank's
+    // change since the last merge (in rank order, in double, so every rank computes the
+    // same floats).
+    bool shares_surface() const { return options_.mode == ReplicaMode::domains && size_ > 1; }
+    std::pair<int, int> centre_rows(int ny) const {
+        if (!shares_surface()) return {0, ny};
+        const auto row = [&](int r) { return int(std::int64_t(r) * ny / size_); };
+        return {row(rank_), row(rank_ + 1)};
+    }
+    void merge(std::vector<float>& heights, const std::vector<float>& base) {
+        if (!shares_surface()) return;
+        if (heights.size() != base.size()) throw std::runtime_error("replicas: merge of meshes of different sizes");
+        const std::size_t n = heights.size();
+        gathered_.resize(n * std::size_t(size_));
+        if (n > std::size_t(std::numeric_limits<int>::max())) throw std::runtime_error("replicas: mesh too large to merge");
+        detail::check(MPI_Allgather(heights.data(), int(n), MPI_FLOAT, gathered_.data(), int(n), MPI_FLOAT, comm_),
+                      "MPI_Allgather");
+        for (std::size_t k = 0; k < n; ++k) {
+            const double b = base[k];
+            double h = b;
+            for (int r = 0; r < size_; ++r) h += double(gathered_[std::size_t(r) * n + k]) - b;
+            heights[k] = float(h);
+        }
+        ++merges_;
+    }
+    std::int64_t merges() const { return merges_; }
 
     // --- the end of the run
     // Picks the replica with the lowest objective (ties: lowest rank) and moves its result
@@ -492,6 +577,8 @@ private:
     std::vector<double> all_;
     std::int64_t points_ = 0;     // exchange points met
     std::int64_t decisions_ = 0;  // swap decisions drawn
+    std::vector<float> gathered_;  // domains: every rank's heights at a merge
+    std::int64_t merges_ = 0;
 };
 
 static_assert(ReplicaCoordinator<Replicas>);

@@ -1,0 +1,158 @@
+// Ranks that share one design (freeform/mpi/replica_exchange.hpp, ReplicaMode::domains),
+// run under `mpirun -np 2` (or more) by the ctest test mpi_domains:
+//   1. the ranks' strips of rows are contiguous, disjoint and cover the mesh;
+//   2. a merge gives every rank base + the sum of every rank's change since base, the
+//      same floats on every rank (changes that overlap add up);
+//   3. a whole design: every rank ends holding the same surface bit for bit, each stage
+//      merged at least once, the design's error below its start's, and a second run
+//      with the same seed ends on the same surface.
+#include <mpi.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <freeform/mpi/replica_exchange.hpp>
+
+#include "../support.hpp"
+
+using namespace freeform;
+
+namespace {
+
+int rank = 0, size = 1;
+int failures = 0;
+
+void expect(bool ok, const std::string& what) {
+    if (ok) return;
+    std::fprintf(stderr, "rank %d: FAILED: %s\n", rank, what.c_str());
+    ++failures;
+}
+
+// Every rank's copy of `v`, in rank order.
+std::vector<float> gather_all(const std::vector<float>& v) {
+    std::vector<float> all(v.size() * std::size_t(size));
+    MPI_Allgather(v.data(), int(v.size()), MPI_FLOAT, all.data(), int(v.size()), MPI_FLOAT, MPI_COMM_WORLD);
+    return all;
+}
+
+bool same_on_every_rank(const std::vector<float>& v) {
+    const std::vector<float> all = gather_all(v);
+    for (int r = 1; r < size; ++r)
+        if (std::memcmp(all.data(), all.data() + std::size_t(r) * v.size(), v.size() * sizeof(float)) != 0) return false;
+    return true;
+}
+
+void check_rows(const mpi::Replicas& replicas, int ny) {
+    const auto [j0, j1] = replicas.centre_rows(ny);
+    const int mine[2] = {j0, j1};
+    std::vector<int> all(std::size_t(2 * size));
+    MPI_Allgather(mine, 2, MPI_INT, all.data(), 2, MPI_INT, MPI_COMM_WORLD);
+    expect(all.front() == 0 && all.back() == ny, "strips start at row 0 and end at row ny = " + std::to_string(ny));
+    for (int r = 0; r < size; ++r) {
+        expect(all[std::size_t(2 * r)] < all[std::size_t(2 * r + 1)] || ny < size, "a strip is not empty");
+        if (r > 0) expect(all[std::size_t(2 * r)] == all[std::size_t(2 * r - 1)], "strips are contiguous and disjoint");
+    }
+}
+
+void check_merge(mpi::Replicas& replicas) {
+    const std::size_t n = 40;
+    std::vector<float> base(n);
+    for (std::size_t k = 0; k < n; ++k) base[k] = 0.01f * float(k) - 0.1f;
+    std::vector<float> mine = base;
+    // Rank r changes vertex r (its own) and vertex n-1 (everyone's), by amounts that are
+    // not exact in binary.
+    mine[std::size_t(rank)] += 0.003f * float(rank + 1);
+    mine[n - 1] += 0.0007f * float(rank + 1);
+    const std::vector<float> sent = mine;
+    std::vector<float> all = gather_all(sent);
+    replicas.merge(mine, base);
+    for (std::size_t k = 0; k < n; ++k) {
+        double want = base[k];
+        for (int r = 0; r < size; ++r) want += double(all[std::size_t(r) * n + k]) - double(base[k]);
+        expect(mine[k] == float(want), "merged vertex " + std::to_string(k) + " is base + every rank's change");
+    }
+    expect(std::abs(double(mine[n - 1]) - (double(base[n - 1]) + 0.0007 * size * (size + 1) / 2)) < 1e-6,
+           "changes of several ranks to one vertex add up");
+    expect(same_on_every_rank(mine), "every rank holds the same merged heights");
+    expect(replicas.merges() == 1, "merges counted");
+}
+
+std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& stages, double& error_start,
+                               double& error_end) {
+    mpi::ReplicaOptions ro;
+    ro.mode = mpi::ReplicaMode::domains;
+    ro.exchange_every = 150;
+    mpi::Replicas replicas(MPI_COMM_WORLD, seed, ro);
+    Scene s;
+    s.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
+    s.surface.aperture = Aperture::rect;
+    s.surface.nx = s.surface.ny = 31;
+    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
+    s.receiver.width = s.receiver.height = 40;
+    s.receiver.deposit = Deposit::bilinear;
+    s.light.rays_per_cell = 8;
+    s.target = TargetSpec{};
+    s.surface.initial_shape = InitialShape::flat;
+    const ImageD target = testing::two_blocks(40, 40);
+    DesignOptions o = s.optimise;
+    o.seed = seed;
+    o.time_budget = 0;
+    o.max_iterations = 1500;
+    o.threads = 1;
+    const SurfaceSpec& sp = s.surface;
+    Heightmap initial(31, 31, sp.size, sp.h_min, sp.h_max, sp.frame, sp.aperture);
+    const DesignResult r =
+        design(s, std::move(initial), target, o, [](const DesignProgress&) { return false; }, default_penalties(o),
+               replicas);
+    stages = r.stages;
+    error_start = r.stages.front().error_start;
+    error_end = r.value.error;
+    return r.surface.heights();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    MPI_Init(&argc, &argv);
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &size);
+    try {
+        mpi::ReplicaOptions ro;
+        ro.mode = mpi::ReplicaMode::domains;
+        mpi::Replicas replicas(MPI_COMM_WORLD, 7, ro);
+        expect(replicas.shares_surface() == (size > 1), "domains share one surface when there are several ranks");
+        for (int ny : {7, 31, 101}) check_rows(replicas, ny);
+        check_merge(replicas);
+
+        std::vector<StageReport> stages;
+        double start = 0, end = 0;
+        const std::vector<float> a = design_once(11, stages, start, end);
+        expect(same_on_every_rank(a), "every rank ends the design on the same surface, bit for bit");
+        for (const StageReport& st : stages)
+            expect(st.merges >= 1, "level " + std::to_string(st.level) + " stage merged " + std::to_string(st.merges) +
+                                       " times");
+        expect(std::isfinite(end) && end < start, "the design lowers the error: " + std::to_string(start) + " -> " +
+                                                       std::to_string(end));
+        std::vector<StageReport> again_stages;
+        double s2 = 0, e2 = 0;
+        const std::vector<float> b = design_once(11, again_stages, s2, e2);
+        expect(a == b, "the same seed and rank count give the same design");
+        if (rank == 0 && failures == 0)
+            std::printf("ok   domains over %d ranks: %zu stages, error %.4f -> %.4f\n", size, stages.size(), start, end);
+    } catch (const std::exception& e) {
+        expect(false, std::string("unexpected exception: ") + e.what());
+    }
+    int total = 0;
+    MPI_Allreduce(&failures, &total, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);
+    if (rank == 0) {
+        if (total == 0)
+            std::printf("ok   domains over %d ranks: strips, merges and a whole design agree on every rank\n", size);
+        else
+            std::printf("%d check(s) failed\n", total);
+    }
+    MPI_Finalize();
+    return total == 0 ? 0 : 1;
+}
