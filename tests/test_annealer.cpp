@@ -732,3 +732,53 @@ TEST_CASE("exchange hooks: a new temperature scale multiplies every later temper
     bad.exchange_every = -1;
     CHECK_THROWS_AS(validate_anneal_options(bad), InputError);
 }
+
+namespace {
+
+// An exchange hook that replaces the problem's state once (as merging replicas do) with
+// every coordinate at `value`, which it makes the problem's best copy too.
+struct StateReplacer {
+    Rastrigin* problem;
+    std::int64_t at;
+    double value;
+    double energy_after = -1;
+    std::vector<AnnealExchange> seen = {};
+    bool exchange(AnnealExchange& x) {
+        seen.push_back(x);
+        if (x.state.iteration != at) return false;
+        problem->x.fill(value);
+        problem->f = problem->total();
+        problem->best_x = problem->x;
+        energy_after = problem->f;
+        x.state_replaced = true;
+        return false;
+    }
+};
+
+}  // namespace
+
+TEST_CASE("exchange hooks: a replaced state is where the run goes on from, and its new best") {
+    for (const double value : {0.0, 4.5}) {  // the global minimum, then a state far worse than any seen
+        CAPTURE(value);
+        AnnealOptions o = rastrigin_options(7);
+        o.max_iterations = 2000;
+        o.patience = 0;
+        o.exchange_every = 100;
+        Rastrigin p(3);
+        // The worse state comes late, so that the run cannot get back below its old best.
+        const std::int64_t at = value == 0.0 ? 1000 : 1900;
+        StateReplacer hook{&p, at, value};
+        const AnnealResult r = freeform::anneal(p, o, hook);
+        REQUIRE(hook.energy_after >= 0);
+        REQUIRE(hook.seen.size() == 20);
+        const std::size_t k = std::size_t(at / 100);  // hook.seen[k - 1] is the replacement point
+        // The next exchange point sees a run that went on from the replaced state.
+        CHECK(hook.seen[k].state.best_energy <= hook.energy_after);
+        CHECK(r.best_energy <= hook.energy_after);
+        // The run's best is the state the problem ends in (not one from before the
+        // replacement, which the problem no longer holds).
+        CHECK(r.best_energy == doctest::Approx(p.f).epsilon(1e-12));
+        if (value == 0.0) CHECK(r.best_energy == 0.0);
+        if (value == 4.5) CHECK(r.best_energy > hook.seen[k - 1].state.best_energy);
+    }
+}
