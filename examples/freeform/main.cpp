@@ -408,10 +408,10 @@ struct DesignArgs {
     std::optional<int> threads;
     bool quiet = false;
     bool start_only = false;
-    std::string replica_mode = "tempering";  // freeform_mpi only
+    std::string replica_mode = "domains";  // freeform_mpi only
     double ladder_ratio = 1.5;        // freeform_mpi only
     std::int64_t exchange_every = 0;  // freeform_mpi only; 0 = automatic
-    double merge_coverage = 10;       // freeform_mpi only
+    double merge_coverage = 30;       // freeform_mpi only
 };
 
 #if defined(FREEFORM_WITH_MPI)
@@ -799,9 +799,9 @@ int cli_main(int argc, char** argv) {
                          "write the start surface alone (the transport surface by default), without annealing");
 #if defined(FREEFORM_WITH_MPI)
     design_cmd->add_option("--replica-mode", da.replica_mode,
-                           "tempering: each rank a replica of the design at its own temperature, the best one wins "
-                           "(default); domains: the ranks share one design, each moving a strip of the mesh, merged "
-                           "at exchange points");
+                           "domains (default): the ranks share one design, each moving a strip of the mesh, merged "
+                           "at exchange points; tempering: each rank a replica of the design at its own temperature, "
+                           "the best one wins");
     design_cmd->add_option("--ladder-ratio", da.ladder_ratio,
                            "replica exchange: temperature scale of rung k is RATIO^k (default 1.5)")
         ->check(CLI::Range(1.0, 1e6));
@@ -812,7 +812,7 @@ int cli_main(int argc, char** argv) {
         ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
     design_cmd->add_option("--merge-coverage", da.merge_coverage,
                            "domains: moves per vertex of a strip between merges, when --exchange-every is 0 "
-                           "(default 10)")
+                           "(default 30)")
         ->check(CLI::Range(1e-3, 1e6));
 #endif
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"

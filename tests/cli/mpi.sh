@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
-# Replica exchange over MPI, as a user runs it (freeform/mpi/replica_exchange.hpp):
+# freeform_mpi, as a user runs it (freeform/mpi/replica_exchange.hpp):
 #   mpi.sh FREEFORM FREEFORM_MPI MPIEXEC SCENE WORK
 # 1. `mpirun -np 1 freeform_mpi design` == `freeform design`, bit for bit (surface files)
-# 2. two `mpirun -np 2` runs with the same seed write identical surface files
-# 3. metrics.json has the replica fields (ranks, exchanges per pair, winner)
+# 2. tempering: two `mpirun -np 2` runs with the same seed write identical surface files
+# 3. tempering: metrics.json has the replica fields (ranks, exchanges per pair, winner)
 # 4. ranks x threads: 2 ranks x 2 threads write what 2 ranks x 1 thread write, and
 #    metrics.json records each rank's threads and cores; rank 0 warns exactly when a
 #    rank has more threads than the cores mpirun bound it to
 # 5. a rank that dies ends the run non-zero, with no metrics.json or surface files
-# 6. domains (--replica-mode domains): -np 1 == freeform design bit for bit; -np 2 twice
+# 6. domains (the default mode): -np 1 == freeform design bit for bit; -np 2 twice
 #    gives identical files, and 2 ranks x 2 threads the same as 2 x 1; metrics.json
 #    records the mode, the merges and the moves of both ranks; a bad mode exits 2
 set -uo pipefail
@@ -34,6 +34,7 @@ done
 
 for run in a b; do
     "${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out "np2$run" --threads 1 --quiet --exchange-every 100 \
+        --replica-mode tempering \
         >"np2$run.log" 2>&1 || fail "mpirun -np 2 (run $run): $(cat "np2$run.log")"
 done
 before=$failures
@@ -65,9 +66,9 @@ PY
 # binding (one core per rank for 2 ranks on a machine with 2 or more cores).
 before=$failures
 "${mpirun[@]}" --bind-to none -np 2 "$freeform_mpi" design "$scene" --out np2t2 --threads 2 --quiet \
-    --exchange-every 100 >np2t2.log 2>&1 || fail "mpirun -np 2 --threads 2 (unbound): $(cat np2t2.log)"
+    --exchange-every 100 --replica-mode tempering >np2t2.log 2>&1 || fail "mpirun -np 2 --threads 2 (unbound): $(cat np2t2.log)"
 "${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out np2t2bound --threads 2 --quiet \
-    --exchange-every 100 >np2t2bound.log 2>&1 || fail "mpirun -np 2 --threads 2 (bound): $(cat np2t2bound.log)"
+    --exchange-every 100 --replica-mode tempering >np2t2bound.log 2>&1 || fail "mpirun -np 2 --threads 2 (bound): $(cat np2t2bound.log)"
 for d in np2t2 np2t2bound; do
     for f in "${files[@]}"; do
         cmp -s "np2a/$f" "$d/$f" || fail "$d: $f differs from 2 ranks x 1 thread"
@@ -102,7 +103,7 @@ for f in "${files[@]}"; do
 done
 for run in a b; do
     "${mpirun[@]}" -np 2 "$freeform_mpi" design "$scene" --out "dom2$run" --threads 1 --quiet \
-        --replica-mode domains --exchange-every 150 >"dom2$run.log" 2>&1 || fail "domains -np 2: $(cat "dom2$run.log")"
+        --exchange-every 150 >"dom2$run.log" 2>&1 || fail "domains -np 2: $(cat "dom2$run.log")"
 done
 "${mpirun[@]}" --bind-to none -np 2 "$freeform_mpi" design "$scene" --out dom2t2 --threads 2 --quiet \
     --replica-mode domains --exchange-every 150 >dom2t2.log 2>&1 || fail "domains -np 2 --threads 2: $(cat dom2t2.log)"
