@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Replica exchange over MPI against the plain design at equal total cores (issue 12).
+"""freeform_mpi (domains or tempering) against the plain design at equal total cores (issue 12).
 
 For each scene, seed and configuration, runs `freeform design` (1 rank x C threads) or
 `mpirun -np N freeform_mpi design` (N ranks x C/N threads; N > C oversubscribes: the
@@ -17,7 +17,10 @@ it ran. Runs are interleaved by seed (seed, then scene, then configuration), so 
 load from other work on the machine falls on every configuration alike.
 
 --ladder-ratios 1.5 1.1 runs every multi-rank configuration at each ratio (the 1-rank
-runs once per seed); --ladder-ratio R is the same as --ladder-ratios R.
+runs once per seed); --ladder-ratio R is the same as --ladder-ratios R (tempering only).
+--replica-mode and --merge-coverage are passed to every multi-rank run; without them
+freeform_mpi's defaults apply (domains, coverage 30). benchmarks/mpi/plot.py draws the
+error against the budget from one or more runs.csv.
 """
 import argparse
 import csv
