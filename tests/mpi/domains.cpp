@@ -17,19 +17,15 @@
 #include <freeform/mpi/replica_exchange.hpp>
 
 #include "../support.hpp"
+#include "check.hpp"
 
 using namespace freeform;
+using testing::mpi_check::expect;
+using testing::mpi_check::rank;
 
 namespace {
 
-int rank = 0, size = 1;
-int failures = 0;
-
-void expect(bool ok, const std::string& what) {
-    if (ok) return;
-    std::fprintf(stderr, "rank %d: FAILED: %s\n", rank, what.c_str());
-    ++failures;
-}
+int size = 1;
 
 // Every rank's copy of `v`, in rank order.
 std::vector<float> gather_all(const std::vector<float>& v) {
@@ -86,14 +82,9 @@ std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& sta
     ro.mode = mpi::ReplicaMode::domains;
     ro.exchange_every = 150;
     mpi::Replicas replicas(MPI_COMM_WORLD, seed, ro);
-    Scene s;
-    s.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
-    s.surface.aperture = Aperture::rect;
+    Scene s = testing::basic_scene(40, 8);
     s.surface.nx = s.surface.ny = 31;
-    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
-    s.receiver.width = s.receiver.height = 40;
     s.receiver.deposit = Deposit::bilinear;
-    s.light.rays_per_cell = 8;
     s.target = TargetSpec{};
     s.surface.initial_shape = InitialShape::flat;
     const ImageD target = testing::two_blocks(40, 40);
@@ -102,10 +93,8 @@ std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& sta
     o.time_budget = 0;
     o.max_iterations = 1500;
     o.threads = 1;
-    const SurfaceSpec& sp = s.surface;
-    Heightmap initial(31, 31, sp.size, sp.h_min, sp.h_max, sp.frame, sp.aperture);
     const DesignResult r =
-        design(s, std::move(initial), target, o, [](const DesignProgress&) { return false; }, default_penalties(o),
+        design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; }, default_penalties(o),
                replicas);
     stages = r.stages;
     error_start = r.stages.front().error_start;
@@ -140,19 +129,11 @@ int main(int argc, char** argv) {
         double s2 = 0, e2 = 0;
         const std::vector<float> b = design_once(11, again_stages, s2, e2);
         expect(a == b, "the same seed and rank count give the same design");
-        if (rank == 0 && failures == 0)
+        if (rank == 0 && testing::mpi_check::failures == 0)
             std::printf("ok   domains over %d ranks: %zu stages, error %.4f -> %.4f\n", size, stages.size(), start, end);
     } catch (const std::exception& e) {
         expect(false, std::string("unexpected exception: ") + e.what());
     }
-    int total = 0;
-    MPI_Allreduce(&failures, &total, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);
-    if (rank == 0) {
-        if (total == 0)
-            std::printf("ok   domains over %d ranks: strips, merges and a whole design agree on every rank\n", size);
-        else
-            std::printf("%d check(s) failed\n", total);
-    }
-    MPI_Finalize();
-    return total == 0 ? 0 : 1;
+    return testing::mpi_check::finish("ok   domains over " + std::to_string(size) +
+                  " ranks: strips, merges and a whole design agree on every rank");
 }

@@ -19,19 +19,14 @@
 #include <freeform/mpi/replica_exchange.hpp>
 
 #include "../support.hpp"
+#include "check.hpp"
 
 using namespace freeform;
+using testing::mpi_check::expect;
+using testing::mpi_check::rank;
 
 namespace {
 
-int rank = 0;
-int failures = 0;
-
-void expect(bool ok, const std::string& what) {
-    if (ok) return;
-    std::fprintf(stderr, "rank %d: FAILED: %s\n", rank, what.c_str());
-    ++failures;
-}
 
 template <class T>
 bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
@@ -138,15 +133,6 @@ int main(int argc, char** argv) {
     } catch (const std::exception& e) {
         expect(false, std::string("unexpected exception: ") + e.what());
     }
-    int total = 0;
-    MPI_Allreduce(&failures, &total, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);
-    if (rank == 0) {
-        if (total == 0)
-            std::printf("ok   share_start over %d ranks: made on rank 0 alone, received bit for bit; errors reach every rank\n",
-                        size);
-        else
-            std::printf("%d check(s) failed\n", total);
-    }
-    MPI_Finalize();
-    return total == 0 ? 0 : 1;
+    return testing::mpi_check::finish("ok   share_start over " + std::to_string(size) +
+                  " ranks: made on rank 0 alone, received bit for bit; errors reach every rank");
 }
