@@ -666,3 +666,26 @@ TEST_CASE("a short letter-E design gets the error down to 0.15") {
     MESSAGE("letter E: error " << r.value.error << " (flat start " << flat << ") after " << r.iterations
                                << " iterations");
 }
+
+TEST_CASE("a time-budgeted design uses its whole budget: the last stage runs until the time is up") {
+    // The stages' iteration budgets are fitted to the speed the calibration measured;
+    // the last stage must not end on that budget with time left (it cools on instead).
+    Scene s = basic_scene(20, 8);
+    s.surface.nx = s.surface.ny = 21;
+    Heightmap truth = surface_for(s, 21);
+    shape(truth, [](double u, double v) { return -(u * u + v * v) / (4 * 2.0); });
+    const ImageD target = trace_scene(s, truth, 7).histogram.to_image();
+    DesignOptions o;
+    o.time_budget = 1.5;
+    o.seed = 1;
+    o.threads = 1;
+    const DesignResult r = design(s, surface_for(s, 21), target, o, never_stop());
+    REQUIRE(!r.stages.empty());
+    CHECK(r.stages.back().stop_reason == "time_budget");
+    CHECK(r.seconds >= 0.95 * o.time_budget);
+    // Earlier stages still end on their budgets or their share of the time.
+    for (std::size_t k = 0; k + 1 < r.stages.size(); ++k) {
+        CAPTURE(k);
+        CHECK((r.stages[k].stop_reason == "max_iterations" || r.stages[k].stop_reason == "time_budget"));
+    }
+}

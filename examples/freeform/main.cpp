@@ -643,8 +643,9 @@ int run_design(const DesignArgs& a) {
         if (replica_options.exchange_every > 0)
             r["exchange_every"] = replica_options.exchange_every;
         else
-            r["exchange_every"] = domains ? "automatic: merge_coverage x (mesh vertices / ranks) / kernel support^2, "
-                                            "at least 500"
+            r["exchange_every"] = domains ? "automatic: merges every merge_coverage x (mesh vertices / ranks) / kernel "
+                                            "support^2 iterations, at least 500; the ranks meet every 500 to stop "
+                                            "together"
                                           : "automatic: 500";
         if (domains) r["merge_coverage"] = replica_options.merge_coverage;
         r["exchange_points"] = replicas.exchange_points();

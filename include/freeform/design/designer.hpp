@@ -498,6 +498,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             budget = replicas.common_budget(budget);
             ao.max_iterations = budget;
             ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
+            // The last stage of a time-budgeted run goes on until the time is up: its
+            // budget, fitted to the speed the calibration measured, often runs out first
+            // (letter E, 20 s: at 17.9 s), and the schedule simply cools on past it.
+            if (options.time_budget > 0 && options.max_iterations == 0 && li + 1 == levels.size() &&
+                si + 1 == stages)
+                ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
             ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
             ao.reheat_factor = options.reheat_factor;
             ao.time_budget = options.time_budget > 0 ? stage_time : 0;
@@ -536,6 +542,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 std::vector<float> merge_base = {};
                 std::int64_t merged_at = 0;
                 std::int64_t merges = 0;
+                std::int64_t merge_every = 0;
                 // Held-out checks at the first sync point past each interval: sync points
                 // are fixed iterations, so the checks do not change the run's course.
                 // Replicas that share a surface check only merged states (the same on
@@ -569,7 +576,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                    (target > 0 && x.state.best_energy <= target);
                     const bool stop_all = replicas->exchange(r);
                     x.temperature_scale = r.temperature_scale;
-                    if (replicas->shares_surface()) {
+                    if (replicas->shares_surface() && (stop_all || x.state.iteration - merged_at >= merge_every)) {
                         merge(x.state.iteration);
                         x.state_replaced = true;
                     }
@@ -610,7 +617,10 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 hooks.replicas = &replicas;
                 hooks.stage_deadline = options.time_budget > 0 ? elapsed() + stage_time : 0;
                 hooks.target = options.target_error;
-                if (replicas.shares_surface()) hooks.merge_base = surface.heights();
+                if (replicas.shares_surface()) {
+                    hooks.merge_base = surface.heights();
+                    hooks.merge_every = replicas.merge_every(level.mesh_x, level.mesh_y, support);
+                }
             }
 
             const AnnealResult ar = anneal(problem, ao, hooks);

@@ -35,10 +35,14 @@
 //                                       replica stops the stage here
 //   bool shares_surface() const         true: the replicas are not copies but parts of one
 //                                       design (domain decomposition): each moves only the
-//                                       mesh rows centre_rows() gives it, and at every
-//                                       exchange point, and at the end of every stage, they
-//                                       merge their surfaces (merge) and all go on from the
-//                                       merged one
+//                                       mesh rows centre_rows() gives it, and every
+//                                       merge_every() iterations, at the end of every stage
+//                                       and where the stage stops, they merge their
+//                                       surfaces (merge) and all go on from the merged one
+//   std::int64_t merge_every(int nx, int ny, int support) const
+//                                       sharing: iterations between merges (a merge is made
+//                                       at the first exchange point that far from the
+//                                       last); otherwise 0
 //   std::pair<int, int> centre_rows(int ny) const
 //                                       the rows [j0, j1) of an ny-row mesh this replica
 //                                       centres its moves on (all of them unless sharing)
@@ -83,6 +87,7 @@ struct SingleReplica {
     bool any(bool b) const { return b; }
     bool exchange(ReplicaExchange& x) const { return x.local_stop; }
     bool shares_surface() const { return false; }
+    std::int64_t merge_every(int, int, int) const { return 0; }
     std::pair<int, int> centre_rows(int ny) const { return {0, ny}; }
     void merge(std::vector<float>&, const std::vector<float>&) const {}
 };
@@ -101,6 +106,7 @@ concept ReplicaCoordinator = requires(C& c, const C& cc, std::uint64_t seed, dou
     { c.any(f) } -> std::convertible_to<bool>;
     { c.exchange(x) } -> std::convertible_to<bool>;
     { cc.shares_surface() } -> std::convertible_to<bool>;
+    { cc.merge_every(ny, ny, ny) } -> std::convertible_to<std::int64_t>;
     { cc.centre_rows(ny) } -> std::same_as<std::pair<int, int>>;
     c.merge(heights, heights);
 };
