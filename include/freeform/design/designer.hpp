@@ -337,8 +337,9 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
     const auto t_start = clock::now();
     const auto elapsed = [&] { return std::chrono::duration<double>(clock::now() - t_start).count(); };
     // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
-    // may then depend on measured time (see calibrate()).
-    const bool timed_calibration = options.time_budget > 0 && options.max_iterations == 0;
+    // may then depend on measured time (see calibrate()). Otherwise the run is timed: its
+    // calibrations are cut short by slow moves and its stages' budgets fit the speed.
+    const bool timed = options.time_budget > 0 && options.max_iterations == 0;
     const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold, options.lost_light_weight};
 
     Scene planned = scene;
@@ -405,6 +406,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
         for (std::size_t si = 0; si < stages && !stop; ++si) {
             const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
             const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
+            const bool last = li + 1 == levels.size() && si + 1 == stages;  // the design's last stage
             // The history bandit's pre-process (reference §4.3.2): a short run with every
             // shape equally likely, then only the shapes that paid best are kept.
             if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
@@ -415,7 +417,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
                                      weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
                 const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), moves.initial_acceptance,
-                                                    timed_calibration);
+                                                    timed);
                 pre.set_reference_temperature(cal.temperature);
                 AnnealOptions po;
                 po.seed = hash_combine(stage_seed, 2);
@@ -442,7 +444,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                                      weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
-                                                                                  timed_calibration);
+                                                                                  timed);
             const double t0 = replicas.common_temperature(cal.temperature * options.initial_temperature_scale);  // identity for one replica
             problem.set_reference_temperature(t0);
             // Replicas that share one surface each move their own strip of it (after the
@@ -481,7 +483,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             // as the measured speed fits in the stage's time (so that the temperature
             // schedule completes); otherwise the plan's, which makes the run reproducible.
             std::int64_t budget = std::max<std::int64_t>(1, level.iterations / std::int64_t(stages));
-            if (options.time_budget > 0 && options.max_iterations == 0) {
+            if (timed) {
                 const double parallel = 1.0 + 0.6 * (std::min(speculative, threads) - 1);
                 budget = std::max<std::int64_t>(500, std::int64_t(0.9 * cal.moves_per_second * parallel * stage_time));
             }
@@ -501,9 +503,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             // The last stage of a time-budgeted run goes on until the time is up: its
             // budget, fitted to the speed the calibration measured, often runs out first
             // (letter E, 20 s: at 17.9 s), and the schedule simply cools on past it.
-            if (options.time_budget > 0 && options.max_iterations == 0 && li + 1 == levels.size() &&
-                si + 1 == stages)
-                ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
+            if (timed && last) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
             ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
             ao.reheat_factor = options.reheat_factor;
             ao.time_budget = options.time_budget > 0 ? stage_time : 0;
@@ -657,7 +657,6 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             stop = replicas.any(hooks.stopped ||
                                 (options.target_error > 0 && problem.value().total <= options.target_error));
 
-            const bool last = li + 1 == levels.size() && si + 1 == stages;
             if (last || stop) {
                 result.irradiance = problem.histogram();
                 result.target = problem.image().target();

@@ -86,7 +86,7 @@ public:
         : backend_(std::move(backend)), surface_(&surface), rays_(&rays), trace_(surface, rays, params),
           image_(std::move(target)),
           weights_(weights), penalties_(&penalties), proposals_(std::move(proposals)), bandit_(std::move(bandit)),
-          unit_(metres_per_cell_shift), t_ref_(reference_temperature) {
+          unit_(metres_per_cell_shift), t_ref_(reference_temperature), row1_(surface.ny()) {
         for (const auto& s : proposals_.bank) kernels_.emplace_back(s);
         if (!proposals_.single_vertex && kernels_.empty())
             throw InputError("optimise.kernels: the kernel bank is empty");
@@ -224,14 +224,13 @@ private:
                     const double u = o.x + t * d.x, v = o.y + t * d.y;
                     ci = std::clamp(int(std::lround((u / surface_->size().x + 0.5) * (nx - 1))), 0, nx - 1);
                     cj = std::clamp(int(std::lround((v / surface_->size().y + 0.5) * (ny - 1))), 0, ny - 1);
-                    if (cj >= row0_ && cj < rows_end()) return;
+                    if (cj >= row0_ && cj < row1_) return;
                 }
             }
         }
         ci = int(rng.below(std::uint64_t(nx)));
-        cj = row0_ + int(rng.below(std::uint64_t(rows_end() - row0_)));
+        cj = row0_ + int(rng.below(std::uint64_t(row1_ - row0_)));
     }
-    int rows_end() const { return row1_ < 0 ? surface_->ny() : row1_; }
 
     double cell_error(const RayRecord& r) const {
         const int x = std::min(int(r.px), image_.width() - 1), y = std::min(int(r.py), image_.height() - 1);
@@ -265,7 +264,7 @@ private:
     bool best_is_current_ = true;
     std::vector<float> best_heights_;
     double max_error_ = 0;
-    int row0_ = 0, row1_ = -1;  // centre rows [row0_, row1_); -1: to the last row
+    int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
 };
 
 using ReflectorProblem = BasicReflectorProblem<HeightfieldBackend>;
