@@ -502,6 +502,9 @@ int run_design(const DesignArgs& a) {
     replica_options.ladder_ratio = a.ladder_ratio;
     replica_options.exchange_every = a.exchange_every;
     replica_options.merge_coverage = a.merge_coverage;
+    // CLI11's range checks let NaN through: name the option, not the library's field.
+    if (!std::isfinite(a.ladder_ratio)) throw InputError("--ladder-ratio: must be a finite number >= 1, got nan");
+    if (!std::isfinite(a.merge_coverage)) throw InputError("--merge-coverage: must be a finite number > 0, got nan");
     mpi::validate(replica_options);
     mpi::Replicas replicas(MPI_COMM_WORLD, options.seed, replica_options);
     const RankLayout layout = rank_layout(thread_count(exec::omp_t{options.threads}));

@@ -10,7 +10,7 @@
 # 5. a rank that dies ends the run non-zero, with no metrics.json or surface files
 # 6. domains (the default mode): -np 1 == freeform design bit for bit; -np 2 twice
 #    gives identical files, and 2 ranks x 2 threads the same as 2 x 1; metrics.json
-#    records the mode, the merges and the moves of both ranks; a bad mode exits 2
+#    records the mode, the merges and the moves of both ranks; a bad mode or a NaN coverage exits 2
 set -uo pipefail
 freeform=$1 freeform_mpi=$2 mpiexec=$3 scene=$4 work=$5
 # Root in CI containers, and more ranks than cores on small machines.
@@ -134,7 +134,14 @@ rc=$?
 [ $rc -eq 2 ] || fail "--replica-mode tiles: exit code $rc, not 2"
 grep -q -- "--replica-mode" dombad.log || fail "--replica-mode tiles: the message does not name the option: $(cat dombad.log)"
 [ ! -e dombad/metrics.json ] || fail "--replica-mode tiles: metrics.json written"
-[ $failures -eq $before ] && echo "ok   domains: np 1 == freeform design; np 2 reproducible, threads change nothing; bad mode exits 2"
+"${mpirun[@]}" -np 1 "$freeform_mpi" design "$scene" --out dombad2 --threads 1 --quiet --merge-coverage nan \
+    >dombad2.log 2>&1
+rc=$?
+[ $rc -eq 2 ] || fail "--merge-coverage nan: exit code $rc, not 2"
+grep -q -- "--merge-coverage: must be a finite number" dombad2.log ||
+    fail "--merge-coverage nan: the message does not name the option: $(cat dombad2.log)"
+[ ! -e dombad2/metrics.json ] || fail "--merge-coverage nan: metrics.json written"
+[ $failures -eq $before ] && echo "ok   domains: np 1 == freeform design; np 2 reproducible, threads change nothing; bad mode or coverage exits 2"
 
 FREEFORM_TEST_ABORT_RANK=1 "${mpirun[@]}" -x FREEFORM_TEST_ABORT_RANK -np 2 "$freeform_mpi" design "$scene" \
     --out dead --threads 1 --quiet >dead.log 2>&1
