@@ -79,11 +79,18 @@ private:
         finished_.notify_all();
     }
 
-    // The caller's wait: tasks are short, so spin a little before sleeping.
+    // The caller's wait: tasks are short, so spin a little, then yield the core for about
+    // a millisecond (as an idle worker does), before sleeping. A caller that finished its
+    // share a few microseconds before a worker used to fall asleep here and wake tens of
+    // microseconds later (perf: a quarter of a split move's time with two threads).
     template <class Ready>
     void wait_for(Ready&& ready) {
         for (int spin = 0; spin < 4000; ++spin)
             if (ready()) return;
+        for (int spin = 0; spin < 2000; ++spin) {
+            std::this_thread::yield();
+            if (ready()) return;
+        }
         std::unique_lock lock(mutex_);
         finished_.wait(lock, ready);
     }

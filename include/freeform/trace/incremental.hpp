@@ -226,6 +226,9 @@ struct LaneCellBuffer {
 // merged in order afterwards.
 struct TracePart {
     std::vector<std::int32_t> rays;       // affected rays (of this part)
+    std::vector<RayRecord> records;       // new records of `rays`
+    std::vector<std::int32_t> cell_begin; // where each ray's cells start in `cells`
+                                          // (TraceChange: rays.size() + 1 offsets)
     std::vector<CellCrossing> cells;      // their new cell lists, packed
     SparseDelta histogram;                // change of R
     std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
@@ -243,6 +246,8 @@ struct TracePart {
         if (std::int64_t(histogram.value.size()) != receiver_cells) histogram.resize(std::size_t(receiver_cells));
         histogram.clear();
         rays.clear();
+        records.clear();
+        cell_begin.clear();
         cells.clear();
         status_delta.fill(0);
         rays_moved = 0;
@@ -257,8 +262,6 @@ struct TracePart {
 // The outcome of retracing the rays a move can affect; filled by evaluate(), consumed by
 // commit(). Holds its own working memory so several can be evaluated concurrently.
 struct TraceChange : TracePart {
-    std::vector<RayRecord> records;       // new records of `rays`
-    std::vector<std::int32_t> cell_begin; // rays.size() + 1 offsets into cells
     // Height ranges of the move's cells before and after it, widened as the walk's
     // culling test widens them (scratch of the ray selection).
     struct CellReach {
@@ -268,11 +271,7 @@ struct TraceChange : TracePart {
     std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
     std::vector<std::unique_ptr<TracePart>> parts;  // parts 1, 2, ... of a split (part 0 is this change)
 
-    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) {
-        reset_part(ray_count, receiver_cells);
-        records.clear();
-        cell_begin.clear();
-    }
+    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) { reset_part(ray_count, receiver_cells); }
 };
 
 // Maintained per-ray records and ray/cell index for one height field, ray set and scene.
@@ -395,7 +394,17 @@ public:
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
-            if (select_rays(o, change, pool)) retrace_packets_into(view, change, pool);
+            // Each thread retraces the rays it selected right away (one parallel section
+            // a move instead of two); the parts are concatenated in order, so the change
+            // is the serial one.
+            const hf_detail::Grid grid = hf_detail::grid_of(view);
+            if (select_rays(o, change, pool, [&](TracePart& out) {
+                    out.records.resize(out.rays.size());
+                    out.cell_begin.resize(out.rays.size());
+                    retrace_packets_range(view, grid, out.rays.data(), out.rays.size(), out.records.data(),
+                                          out.cell_begin.data(), out);
+                }))
+                change.cell_begin.push_back(std::int32_t(change.cells.size()));
             return;
         }
 #endif
@@ -444,15 +453,39 @@ public:
 
 private:
     // Starts `change` for the move `o` and lists the rays it must retrace; false (and an
-    // empty change) when the move changes nothing.
-    bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
+    // empty change) when the move changes nothing. `per_part(part)` runs on each part of
+    // the selection (the thread that selected it) once its rays are listed.
+    template <class PerPart>
+    bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool, PerPart&& per_part) const {
         change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         if (o.empty()) {
             change.cell_begin.push_back(0);
             return false;
         }
-        collect_rays(o, affected_cells(o), change, pool);
+        collect_rays(o, affected_cells(o), change, pool, per_part);
         return true;
+    }
+    bool select_rays(const HeightOverlay& o, TraceChange& change) const {
+        return select_rays(o, change, nullptr, [](TracePart&) {});
+    }
+
+    // Appends part `other` of a split to `change`: its rays, records, cells (offsets
+    // shifted), histogram change and counts.
+    static void absorb(TraceChange& change, TracePart& other) {
+        const auto offset = std::int32_t(change.cells.size());
+        change.rays.insert(change.rays.end(), other.rays.begin(), other.rays.end());
+        change.records.insert(change.records.end(), other.records.begin(), other.records.end());
+        for (std::int32_t b : other.cell_begin) change.cell_begin.push_back(b + offset);
+        change.cells.insert(change.cells.end(), other.cells.begin(), other.cells.end());
+        for (auto c : other.histogram.touched) {  // a cell may be listed twice: take it once
+            Fixed& v = other.histogram.value[std::size_t(c)];
+            if (v != 0) change.histogram.add(c, v);
+            v = 0;
+        }
+        other.histogram.touched.clear();
+        for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += other.status_delta[st];
+        change.rays_moved += other.rays_moved;
+        change.rays_culled += other.rays_culled;
     }
 
     // Makes parts 1 .. parts - 1 of a split ready; part(change, p) is part p (part 0: the
@@ -522,7 +555,10 @@ private:
             return;
         }
         const std::size_t n = sort_merge_cells(lanes.cell[l], std::size_t(lanes.count[l]));
-        out.insert(out.end(), lanes.cell[l], lanes.cell[l] + n);
+        // One to a few cells: push_back's inlined path (vector::insert's general one cost
+        // more than the copy, about 85 instructions a ray under callgrind).
+        if (out.capacity() - out.size() < n) out.reserve(2 * (out.size() + n));
+        for (std::size_t k = 0; k < n; ++k) out.push_back(lanes.cell[l][k]);
     }
 
     // retrace_into with the packet tracer, eight rays at a time, split over the pool's
@@ -536,7 +572,8 @@ private:
         const int threads = pool != nullptr ? pool->threads() : 1;
         const int parts = int(std::min<std::size_t>(std::size_t(threads), n / min_rays_per_thread));
         if (parts <= 1) {
-            retrace_packets_range(view, grid, change, 0, n, change);
+            retrace_packets_range(view, grid, change.rays.data(), n, change.records.data(), change.cell_begin.data(),
+                                  change);
             change.cell_begin[n] = std::int32_t(change.cells.size());
             return;
         }
@@ -549,7 +586,9 @@ private:
                                                     packet::width * packet::width);
         start_parts(change, parts);
         run_parts(*pool, parts, [&](int p) {
-            retrace_packets_range(view, grid, change, bound[std::size_t(p)], bound[std::size_t(p) + 1], part(change, p));
+            const std::size_t b = bound[std::size_t(p)];
+            retrace_packets_range(view, grid, change.rays.data() + b, bound[std::size_t(p) + 1] - b,
+                                  change.records.data() + b, change.cell_begin.data() + b, part(change, p));
         });
         for (int p = 1; p < parts; ++p) {
             TracePart& other = *change.parts[std::size_t(p - 1)];
@@ -567,35 +606,35 @@ private:
         change.cell_begin[n] = std::int32_t(change.cells.size());
     }
 
-    // Retraces change.rays[begin, end): records and cell offsets (relative to out.cells)
-    // in place, the rest into `out`.
+    // Retraces the n rays ids[0..n): their records into records[0..n), where each one's
+    // cells start in out.cells into cell_begin[0..n), the cells and the rest into `out`.
     template <class View>
-    void retrace_packets_range(const View& view, const hf_detail::Grid& grid, TraceChange& change,
-                               std::size_t begin, std::size_t end, TracePart& out) const {
+    void retrace_packets_range(const View& view, const hf_detail::Grid& grid, const std::int32_t* ids, std::size_t n,
+                               RayRecord* records, std::int32_t* cell_begin, TracePart& out) const {
         Vec3 o[packet::width], d[packet::width];
         RayRecord rec[packet::width];
-        for (std::size_t k0 = begin; k0 < end; k0 += packet::width) {
-            const int count = int(std::min<std::size_t>(packet::width, end - k0));
+        for (std::size_t k0 = 0; k0 < n; k0 += packet::width) {
+            const int count = int(std::min<std::size_t>(packet::width, n - k0));
             // The rays of a move are scattered over the ray arrays: ask for the next
             // packet's data now, so that it arrives while this packet is traced.
-            for (std::size_t k = k0 + packet::width; k < std::min(end, k0 + 2 * packet::width); ++k) {
-                const auto id = std::size_t(change.rays[k]);
+            for (std::size_t k = k0 + packet::width; k < std::min(n, k0 + 2 * packet::width); ++k) {
+                const auto id = std::size_t(ids[k]);
                 prefetch(rays_->origin.data() + id);
                 prefetch(rays_->direction.data() + id);
                 prefetch(rays_->weight.data() + id);
                 prefetch(records_.data() + id);
             }
             for (int l = 0; l < count; ++l) {
-                const auto id = std::size_t(change.rays[k0 + std::size_t(l)]);
+                const auto id = std::size_t(ids[k0 + std::size_t(l)]);
                 o[l] = rays_->origin[id], d[l] = rays_->direction[id];
             }
             trace_packet(view, grid, o, d, count, rec, out.lane_cells);
             for (int l = 0; l < count; ++l) {
                 const std::size_t k = k0 + std::size_t(l);
-                change.cell_begin[k] = std::int32_t(out.cells.size());
+                cell_begin[k] = std::int32_t(out.cells.size());
                 append_lane_cells(view, out.lane_cells, l, o[l], d[l], rec[l], out.cells);
-                change.records[k] = rec[l];
-                account(change.rays[k], rec[l], out);
+                records[k] = rec[l];
+                account(ids[k], rec[l], out);
             }
         }
     }
@@ -627,7 +666,9 @@ private:
     // scanned in order and a ray is taken at its first sighting, so a thread skips the rays
     // that also cross a cell of an earlier thread's rows (that thread has them): the rays
     // of thread 0, then of thread 1, ... are exactly the serial selection, in its order.
-    void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change, TaskPool* pool) const {
+    template <class PerPart>
+    void collect_rays(const HeightOverlay& o, const Patch& cells, TraceChange& change, TaskPool* pool,
+                      PerPart& per_part) const {
         const int row = surface_->nx() - 1;
         change.reach.resize(std::size_t(cells.count()));
         {
@@ -661,15 +702,16 @@ private:
                                                      listed / min_rays_per_thread}));
         if (parts <= 1) {
             scan_rows(cells, cells.j0, cells.j1 + 1, change, change);
+            per_part(static_cast<TracePart&>(change));
         } else {
             start_parts(change, parts);
             const auto first_row = [&](int p) { return cells.j0 + cells.height() * p / parts; };
-            run_parts(*pool, parts, [&](int p) { scan_rows(cells, first_row(p), first_row(p + 1), change, part(change, p)); });
-            for (int p = 1; p < parts; ++p) {
-                const TracePart& other = *change.parts[std::size_t(p - 1)];
-                change.rays.insert(change.rays.end(), other.rays.begin(), other.rays.end());
-                change.rays_culled += other.rays_culled;
-            }
+            run_parts(*pool, parts, [&](int p) {
+                TracePart& out = part(change, p);
+                scan_rows(cells, first_row(p), first_row(p + 1), change, out);
+                per_part(out);
+            });
+            for (int p = 1; p < parts; ++p) absorb(change, *change.parts[std::size_t(p - 1)]);
         }
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
