@@ -382,9 +382,11 @@ public:
 
     // Retraces the rays `o` can affect against the surface with `o` applied, without
     // changing anything. Thread-safe for distinct `change` objects.
-    // Fewest rays worth handing to another thread (about ten microseconds of tracing;
-    // waking a sleeping worker costs a few).
-    static constexpr std::size_t min_rays_per_thread = 256;
+    // Fewest rays worth handing to another thread (a few microseconds of tracing; a worker
+    // that yields between runs answers within about one). 256 before the caller stopped
+    // sleeping in its wait: 128 makes 201² / 100² moves (~270 rays) 1.45x faster on two
+    // threads and changes nothing measurable at 101² (benchmarks/results/speed12).
+    static constexpr std::size_t min_rays_per_thread = 128;
 
     // With a pool of several threads, a move with many rays is retraced by all of them,
     // each a contiguous range of its rays, and their outputs are merged in order: the
