@@ -270,8 +270,6 @@ struct TraceChange : TracePart {
     std::vector<CellReach> reach;
     std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
     std::vector<std::unique_ptr<TracePart>> parts;  // parts 1, 2, ... of a split (part 0 is this change)
-
-    void reset_for(std::int64_t ray_count, std::int64_t receiver_cells) { reset_part(ray_count, receiver_cells); }
 };
 
 // Maintained per-ray records and ray/cell index for one height field, ray set and scene.
@@ -380,14 +378,14 @@ public:
         return Patch{np.i0 - 1, np.j0 - 1, np.i1, np.j1}.clipped(surface_->nx() - 1, surface_->ny() - 1);
     }
 
-    // Retraces the rays `o` can affect against the surface with `o` applied, without
-    // changing anything. Thread-safe for distinct `change` objects.
     // Fewest rays worth handing to another thread (a few microseconds of tracing; a worker
     // that yields between runs answers within about one). 256 before the caller stopped
-    // sleeping in its wait: 128 makes 201² / 100² moves (~270 rays) 1.45x faster on two
+    // sleeping in its wait: 128 makes 201² / 100² moves (~270 rays) 1.46x faster on two
     // threads and changes nothing measurable at 101² (benchmarks/results/speed12).
     static constexpr std::size_t min_rays_per_thread = 128;
 
+    // Retraces the rays `o` can affect against the surface with `o` applied, without
+    // changing anything. Thread-safe for distinct `change` objects.
     // With a pool of several threads, a move with many rays is retraced by all of them,
     // each a contiguous range of its rays, and their outputs are merged in order: the
     // change is the same bit for bit (histogram values are exact integer sums). The pool
@@ -426,7 +424,7 @@ public:
     // Retraces every ray against the surface with `o` applied: the reference's full
     // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
     void evaluate_all(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
-        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+        change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         change.rays.resize(std::size_t(rays_->size()));
         for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
         const OverlayView view = overlay_view(*surface_, o);
@@ -459,7 +457,7 @@ private:
     // the selection (the thread that selected it) once its rays are listed.
     template <class PerPart>
     bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool, PerPart&& per_part) const {
-        change.reset_for(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
+        change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         if (o.empty()) {
             change.cell_begin.push_back(0);
             return false;
@@ -479,15 +477,21 @@ private:
         change.records.insert(change.records.end(), other.records.begin(), other.records.end());
         for (std::int32_t b : other.cell_begin) change.cell_begin.push_back(b + offset);
         change.cells.insert(change.cells.end(), other.cells.begin(), other.cells.end());
+        add_totals(change, other);
+    }
+
+    // Adds part `other`'s histogram change, weights per status and counts to `into`
+    // (emptying other's histogram).
+    static void add_totals(TracePart& into, TracePart& other) {
         for (auto c : other.histogram.touched) {  // a cell may be listed twice: take it once
             Fixed& v = other.histogram.value[std::size_t(c)];
-            if (v != 0) change.histogram.add(c, v);
+            if (v != 0) into.histogram.add(c, v);
             v = 0;
         }
         other.histogram.touched.clear();
-        for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += other.status_delta[st];
-        change.rays_moved += other.rays_moved;
-        change.rays_culled += other.rays_culled;
+        for (std::size_t st = 0; st < into.status_delta.size(); ++st) into.status_delta[st] += other.status_delta[st];
+        into.rays_moved += other.rays_moved;
+        into.rays_culled += other.rays_culled;
     }
 
     // Makes parts 1 .. parts - 1 of a split ready; part(change, p) is part p (part 0: the
@@ -559,7 +563,6 @@ private:
         const std::size_t n = sort_merge_cells(lanes.cell[l], std::size_t(lanes.count[l]));
         // One to a few cells: push_back's inlined path (vector::insert's general one cost
         // more than the copy, about 85 instructions a ray under callgrind).
-        if (out.capacity() - out.size() < n) out.reserve(2 * (out.size() + n));
         for (std::size_t k = 0; k < n; ++k) out.push_back(lanes.cell[l][k]);
     }
 
@@ -597,13 +600,7 @@ private:
             const auto offset = std::int32_t(change.cells.size());
             for (std::size_t k = bound[std::size_t(p)]; k < bound[std::size_t(p) + 1]; ++k) change.cell_begin[k] += offset;
             change.cells.insert(change.cells.end(), other.cells.begin(), other.cells.end());
-            for (auto c : other.histogram.touched) {  // a cell may be listed twice: take it once
-                Fixed& v = other.histogram.value[std::size_t(c)];
-                if (v != 0) change.histogram.add(c, v);
-                v = 0;
-            }
-            for (std::size_t st = 0; st < change.status_delta.size(); ++st) change.status_delta[st] += other.status_delta[st];
-            change.rays_moved += other.rays_moved;
+            add_totals(change, other);
         }
         change.cell_begin[n] = std::int32_t(change.cells.size());
     }
@@ -704,7 +701,7 @@ private:
                                                      listed / min_rays_per_thread}));
         if (parts <= 1) {
             scan_rows(cells, cells.j0, cells.j1 + 1, change, change);
-            per_part(static_cast<TracePart&>(change));
+            per_part(change);
         } else {
             start_parts(change, parts);
             const auto first_row = [&](int p) { return cells.j0 + cells.height() * p / parts; };
