@@ -88,15 +88,20 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         const PathParams pp = make_path_params(c.scene);
         IncrementalTrace inc(hm, rays, pp);
         Histogram hist = inc.rebuild(exec::seq);
+        // A twin that evaluates and commits every move with three threads: its state must
+        // stay the serial one, per-cell ray lists included.
+        IncrementalTrace twin(hm, rays, pp);
+        twin.rebuild(exec::seq);
         HeightOverlay o;
-        TraceChange change, split;
+        TraceChange change, split, twin_change;
         TaskPool pool(3);
         CounterRng rng(99, 0);
-        int accepted = 0, split_moves = 0, split_differ = 0;
+        int accepted = 0, split_moves = 0, split_differ = 0, split_commits = 0;
         std::int64_t moved = 0, culled = 0, listed = 0;
         for (int it = 0; it < 2500; ++it) {
             random_bump(hm, rng, o);
             inc.evaluate(o, change);
+            twin.evaluate(o, twin_change, &pool);
             if (it % 4 == 0) {
                 // The same move retraced by three threads, each a range of its rays: the
                 // same change bit for bit.
@@ -116,6 +121,8 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
             if (rng.uniform() < 0.4) {
                 o.commit(hm);
                 inc.commit(change);
+                twin.commit(twin_change, &pool);
+                split_commits += twin_change.part_begin.size() > 2;
                 // Apply the sparse delta (cells may be listed twice: add each once).
                 std::vector<char> done(hist.cells.size(), 0);
                 for (auto cell : change.histogram.touched)
@@ -129,6 +136,7 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         }
         CHECK(split_differ == 0);
         if (packet::use_packets(pp)) CHECK(split_moves > 50);  // the split really ran
+        if (packet::use_packets(pp)) CHECK(split_commits > 50);
         CHECK(accepted > 800);
         CHECK(moved > 1000);  // the moves really moved light
         const Traced full = trace_scene(c.scene, hm, rays);
@@ -159,6 +167,21 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
             differ += same ? 0 : 1;
         }
         CHECK(differ == 0);
+        // The twin, committed in parts, holds the same records, cells and per-cell lists
+        // (in the same order) as the serial commits.
+        CHECK(twin.records() == inc.records());
+        CHECK(twin.weight_by_status() == inc.weight_by_status());
+        std::int64_t twin_differ = 0;
+        for (std::int32_t r = 0; r < std::int32_t(rays.size()); ++r) {
+            const auto a = twin.index().cells_of(r), b = inc.index().cells_of(r);
+            bool same = a.size() == b.size();
+            for (std::size_t k = 0; same && k < a.size(); ++k)
+                same = a[k].cell == b[k].cell && a[k].zlo == b[k].zlo && a[k].zhi == b[k].zhi;
+            twin_differ += same ? 0 : 1;
+        }
+        for (std::int32_t cell = 0; cell < std::int32_t((hm.nx() - 1) * (hm.ny() - 1)); ++cell)
+            twin_differ += twin.index().rays_of(cell) == inc.index().rays_of(cell) ? 0 : 1;
+        CHECK(twin_differ == 0);
         // The bumps (up to 40 % of the slab) leave paths above and below them: some rays
         // listed on a move's cells are out of its reach, and most are not.
         MESSAGE(std::string(c.name), ": ", culled, " of ", listed, " listed rays out of reach");

@@ -33,6 +33,12 @@
 //   void sync()                 after every sync_interval() iterations (asked again after
 //                               each sync; a value ≤ 0 means no more syncs). A proposal
 //                               policy, such as a bandit, changes only there.
+//   double delta(Move& m, TaskPool* pool) const
+//                               delta() with the pool's threads working on the one move
+//                               (asked when one proposal is judged at a time).
+//   void accept(Move& m, TaskPool* pool)
+//                               accept() with the pool's threads (null with one thread);
+//                               the state must be what accept(m) leaves.
 //
 // The run. Iteration j runs at the temperature the schedule gives for its place in the
 // current pass (the temperature steps down every iterations_per_temperature iterations)
@@ -644,7 +650,10 @@ private:
 
         bool stop = false;
         if (taken >= 0) {
-            problem_.accept(moves_[taken]);
+            if constexpr (requires(typename Problem::Move& m, TaskPool* pool) { problem_.accept(m, pool); })
+                problem_.accept(moves_[taken], pool_.get());
+            else
+                problem_.accept(moves_[taken]);
             energy_ = static_cast<double>(problem_.energy());
             ++accepted_;
             ++batch_accepted_;

@@ -162,7 +162,11 @@ public:
         return m.delta_value = after.total - value_.total;
     }
 
-    void accept(Move& m) {
+    void accept(Move& m) { accept(m, nullptr); }
+
+    // accept() with the threads of `pool` storing the parts of a move that delta() split
+    // over them (the state is the same as without; the annealer passes its pool).
+    void accept(Move& m, TaskPool* pool) {
         if (m.arm >= 0) bandit_.update(m.arm, std::max(0.0, -m.delta_value));
         if (m.noop) return;
         // Leaving the best state uphill: keep a copy of it first (rare at low temperature).
@@ -172,7 +176,7 @@ public:
         }
         m.overlay.commit(*surface_);
         backend_.committed(m.overlay.patch);
-        trace_.commit(m.change);
+        trace_.commit(m.change, pool);
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
         value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
