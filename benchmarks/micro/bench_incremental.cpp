@@ -117,7 +117,7 @@ double rays_per_move(Problem& problem) {
         CounterRng rng(5, k);
         problem.propose(rng, 1.0, m);
         (void)problem.delta(m);
-        rays += std::int64_t(m.change.rays.size());
+        rays += std::int64_t(m.change.ray_count());
     }
     return double(rays) / 32;
 }

@@ -117,8 +117,10 @@ private:
             waste_ += s.capacity;
             s.begin = std::int64_t(pool_.size());
             s.capacity = std::uint16_t(std::min<std::size_t>(cells.size() + 2, 65535));
-            pool_.insert(pool_.end(), cells.begin(), cells.end());
-            pool_.resize(pool_.size() + (s.capacity - cells.size()), CellCrossing{-1});
+            // push_back's inlined path: vector::insert and resize(n, value) took their
+            // general paths for these few cells (perf: 1-3 % of a move).
+            for (const CellCrossing& c : cells) pool_.push_back(c);
+            for (std::size_t k = cells.size(); k < s.capacity; ++k) pool_.push_back(CellCrossing{-1});
         }
         s.count = std::uint16_t(cells.size());
         if (waste_ > std::int64_t(pool_.size() / 2) && pool_.size() > 4096) compact();
@@ -232,13 +234,15 @@ struct LaneCellBuffer {
 
 // What one thread of a ray selection and retrace produces: the rays it selected, their
 // cells, the change of the histogram and of the weight per status. A TraceChange is its
-// own first part; a split over threads gives the others one each (TraceChange::parts),
-// merged in order afterwards.
+// own first part; a split over threads gives the others one each (TraceChange::parts).
+// The histogram change, weights and counts of the parts are added into the first; the
+// rays, records and cells stay where they were made (TraceChange::part), to be
+// committed there.
 struct TracePart {
     std::vector<std::int32_t> rays;       // affected rays (of this part)
     std::vector<RayRecord> records;       // new records of `rays`
-    std::vector<std::int32_t> cell_begin; // where each ray's cells start in `cells`
-                                          // (TraceChange: rays.size() + 1 offsets)
+    std::vector<std::int32_t> cell_begin; // where each ray's cells start in `cells`, and
+                                          // where the last one's end (rays.size() + 1)
     std::vector<CellCrossing> cells;      // their new cell lists, packed
     SparseDelta histogram;                // change of R
     std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
@@ -279,10 +283,20 @@ struct TraceChange : TracePart {
     };
     std::vector<CellReach> reach;
     std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
-    std::vector<std::unique_ptr<TracePart>> parts;  // parts 1, 2, ... of a split (part 0 is this change)
-    // Where each part of a split begins in `rays`, and rays.size() last (empty: one part).
-    // commit() hands each part to a thread of its own again.
-    std::vector<std::size_t> part_begin;
+    std::vector<std::unique_ptr<TracePart>> parts;  // room for parts 1, 2, ... of a split
+    int split = 1;  // parts that hold this change's rays: part(0) .. part(split - 1)
+
+    // Part p of the rays (0: this object), in the serial order of the selection.
+    const TracePart& part(int p) const {
+        return p == 0 ? static_cast<const TracePart&>(*this) : *parts[std::size_t(p - 1)];
+    }
+    TracePart& part(int p) { return p == 0 ? static_cast<TracePart&>(*this) : *parts[std::size_t(p - 1)]; }
+    // Rays retraced, all parts together.
+    std::size_t ray_count() const {
+        std::size_t n = 0;
+        for (int p = 0; p < split; ++p) n += part(p).rays.size();
+        return n;
+    }
 };
 
 // Maintained per-ray records and ray/cell index for one height field, ray set and scene.
@@ -400,24 +414,26 @@ public:
     // Retraces the rays `o` can affect against the surface with `o` applied, without
     // changing anything. Thread-safe for distinct `change` objects.
     // With a pool of several threads, a move with many rays is retraced by all of them,
-    // each a contiguous range of its rays, and their outputs are merged in order: the
-    // change is the same bit for bit (histogram values are exact integer sums). The pool
-    // must not be running a task of its own already (no nesting).
+    // each a contiguous run of its rays (change.part(0), part(1), ...): taken in order,
+    // the parts are the serial change bit for bit, and their histogram changes are added
+    // into the change's (exact integer sums). The pool must not be running a task of its
+    // own already (no nesting).
     void evaluate(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
         const OverlayView view = overlay_view(*surface_, o);
 #if !defined(__CUDACC__)
         if (packet::use_packets(params_)) {
             // Each thread retraces the rays it selected right away (one parallel section
-            // a move instead of two); the parts are concatenated in order, so the change
-            // is the serial one.
+            // a move instead of two), into its own part; commit() stores each part with
+            // the thread that made it, so the rays, records and cells are never copied
+            // into one list (that copy was 4 % of the caller's time with two threads).
             const hf_detail::Grid grid = hf_detail::grid_of(view);
-            if (select_rays(o, change, pool, [&](TracePart& out) {
-                    out.records.resize(out.rays.size());
-                    out.cell_begin.resize(out.rays.size());
-                    retrace_packets_range(view, grid, out.rays.data(), out.rays.size(), out.records.data(),
-                                          out.cell_begin.data(), out);
-                }))
-                change.cell_begin.push_back(std::int32_t(change.cells.size()));
+            select_rays(o, change, pool, [&](TracePart& out) {
+                out.records.resize(out.rays.size());
+                out.cell_begin.resize(out.rays.size() + 1);
+                retrace_packets_range(view, grid, out.rays.data(), out.rays.size(), out.records.data(),
+                                      out.cell_begin.data(), out);
+                out.cell_begin.back() = std::int32_t(out.cells.size());
+            });
             return;
         }
 #endif
@@ -438,7 +454,7 @@ public:
     // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
     void evaluate_all(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
         change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-        change.part_begin.clear();
+        change.split = 1;
         change.rays.resize(std::size_t(rays_->size()));
         for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
         const OverlayView view = overlay_view(*surface_, o);
@@ -464,30 +480,32 @@ public:
     // the thread that traced them, and the caller storing them one by one waited on the
     // other core's cache for each (perf: a fifth of the caller's time with two threads).
     void commit(const TraceChange& change, TaskPool* pool = nullptr) {
-        const auto cells_of = [&](std::size_t k) {
-            return std::span(change.cells.data() + change.cell_begin[k],
-                             std::size_t(change.cell_begin[k + 1] - change.cell_begin[k]));
+        const auto cells_of = [](const TracePart& part, std::size_t k) {
+            return std::span(part.cells.data() + part.cell_begin[k],
+                             std::size_t(part.cell_begin[k + 1] - part.cell_begin[k]));
         };
-        const int parts = change.part_begin.empty() ? 1 : int(change.part_begin.size()) - 1;
-        if (pool == nullptr || pool->threads() < 2 || parts < 2) {
-            for (std::size_t k = 0; k < change.rays.size(); ++k) {
-                const std::int32_t id = change.rays[k];
-                records_[std::size_t(id)] = change.records[k];
-                index_.replace(id, cells_of(k));
+        if (pool == nullptr || pool->threads() < 2 || change.split < 2) {
+            for (int p = 0; p < change.split; ++p) {
+                const TracePart& part = change.part(p);
+                for (std::size_t k = 0; k < part.rays.size(); ++k) {
+                    records_[std::size_t(part.rays[k])] = part.records[k];
+                    index_.replace(part.rays[k], cells_of(part, k));
+                }
             }
         } else {
-            if (int(relisted_.size()) < parts) relisted_.resize(std::size_t(parts));
-            run_parts(*pool, parts, [&](int p) {
+            if (int(relisted_.size()) < change.split) relisted_.resize(std::size_t(change.split));
+            run_parts(*pool, change.split, [&](int p) {
+                const TracePart& part = change.part(p);
                 auto& later = relisted_[std::size_t(p)];
                 later.clear();
-                for (std::size_t k = change.part_begin[std::size_t(p)]; k < change.part_begin[std::size_t(p) + 1]; ++k) {
-                    const std::int32_t id = change.rays[k];
-                    records_[std::size_t(id)] = change.records[k];
-                    if (!index_.update_ranges(id, cells_of(k))) later.push_back(k);
+                for (std::size_t k = 0; k < part.rays.size(); ++k) {
+                    records_[std::size_t(part.rays[k])] = part.records[k];
+                    if (!index_.update_ranges(part.rays[k], cells_of(part, k))) later.push_back(k);
                 }
             });
-            for (int p = 0; p < parts; ++p)
-                for (std::size_t k : relisted_[std::size_t(p)]) index_.replace(change.rays[k], cells_of(k));
+            for (int p = 0; p < change.split; ++p)
+                for (std::size_t k : relisted_[std::size_t(p)])
+                    index_.replace(change.part(p).rays[k], cells_of(change.part(p), k));
         }
         for (std::size_t s = 0; s < status_weight_.size(); ++s) status_weight_[s] += change.status_delta[s];
     }
@@ -499,7 +517,7 @@ private:
     template <class PerPart>
     bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool, PerPart&& per_part) const {
         change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-        change.part_begin.clear();
+        change.split = 1;
         if (o.empty()) {
             change.cell_begin.push_back(0);
             return false;
@@ -509,17 +527,6 @@ private:
     }
     bool select_rays(const HeightOverlay& o, TraceChange& change) const {
         return select_rays(o, change, nullptr, [](TracePart&) {});
-    }
-
-    // Appends part `other` of a split to `change`: its rays, records, cells (offsets
-    // shifted), histogram change and counts.
-    static void absorb(TraceChange& change, TracePart& other) {
-        const auto offset = std::int32_t(change.cells.size());
-        change.rays.insert(change.rays.end(), other.rays.begin(), other.rays.end());
-        change.records.insert(change.records.end(), other.records.begin(), other.records.end());
-        for (std::int32_t b : other.cell_begin) change.cell_begin.push_back(b + offset);
-        change.cells.insert(change.cells.end(), other.cells.begin(), other.cells.end());
-        add_totals(change, other);
     }
 
     // Adds part `other`'s histogram change, weights per status and counts to `into`
@@ -536,15 +543,11 @@ private:
         into.rays_culled += other.rays_culled;
     }
 
-    // Makes parts 1 .. parts - 1 of a split ready; part(change, p) is part p (part 0: the
-    // change itself).
+    // Makes parts 1 .. parts - 1 of a split ready (part 0: the change itself).
     void start_parts(TraceChange& change, int parts) const {
         while (change.parts.size() < std::size_t(parts - 1)) change.parts.push_back(std::make_unique<TracePart>());
         for (int p = 1; p < parts; ++p)
             change.parts[std::size_t(p - 1)]->reset_part(rays_->size(), std::int64_t(change.histogram.value.size()));
-    }
-    static TracePart& part(TraceChange& change, int p) {
-        return p == 0 ? change : *change.parts[std::size_t(p - 1)];
     }
 
     // Runs task(p) for p in [0, parts) on the pool; the first exception (in part order) is
@@ -635,7 +638,7 @@ private:
         run_parts(*pool, parts, [&](int p) {
             const std::size_t b = bound[std::size_t(p)];
             retrace_packets_range(view, grid, change.rays.data() + b, bound[std::size_t(p) + 1] - b,
-                                  change.records.data() + b, change.cell_begin.data() + b, part(change, p));
+                                  change.records.data() + b, change.cell_begin.data() + b, change.part(p));
         });
         for (int p = 1; p < parts; ++p) {
             TracePart& other = *change.parts[std::size_t(p - 1)];
@@ -645,7 +648,6 @@ private:
             add_totals(change, other);
         }
         change.cell_begin[n] = std::int32_t(change.cells.size());
-        change.part_begin.assign(bound.begin(), bound.end());
     }
 
     // Retraces the n rays ids[0..n): their records into records[0..n), where each one's
@@ -749,16 +751,12 @@ private:
             start_parts(change, parts);
             const auto first_row = [&](int p) { return cells.j0 + cells.height() * p / parts; };
             run_parts(*pool, parts, [&](int p) {
-                TracePart& out = part(change, p);
+                TracePart& out = change.part(p);
                 scan_rows(cells, first_row(p), first_row(p + 1), change, out);
                 per_part(out);
             });
-            change.part_begin.push_back(0);
-            for (int p = 1; p < parts; ++p) {
-                change.part_begin.push_back(change.rays.size());
-                absorb(change, *change.parts[std::size_t(p - 1)]);
-            }
-            change.part_begin.push_back(change.rays.size());
+            for (int p = 1; p < parts; ++p) add_totals(change, change.part(p));
+            change.split = parts;
         }
         for (int cj = cells.j0; cj <= cells.j1; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci) slot[std::size_t(cj * row + ci)] = -1;
