@@ -1,6 +1,7 @@
 // Incremental evaluation must agree with a full retrace bit for bit, whatever the moves.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -33,6 +34,20 @@ void random_bump(const Heightmap& hm, CounterRng& rng, HeightOverlay& o) {
     o.finish(hm);
 }
 
+bool same_crossing(const CellCrossing& a, const CellCrossing& b) {
+    return a.cell == b.cell && a.zlo == b.zlo && a.zhi == b.zhi;
+}
+
+// Rays whose cells (with their height ranges) differ between two traces of the same rays.
+std::int64_t rays_with_other_cells(const IncrementalTrace& x, const IncrementalTrace& y) {
+    std::int64_t differ = 0;
+    for (std::int32_t r = 0; r < std::int32_t(x.rays().size()); ++r) {
+        const auto a = x.index().cells_of(r), b = y.index().cells_of(r);
+        differ += a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), same_crossing) ? 0 : 1;
+    }
+    return differ;
+}
+
 // Whether a change evaluated in parts (`split`) is the serial one (`serial`, one part):
 // its parts, taken in order, hold the same rays, records and cells (height ranges
 // included), and the totals are the same.
@@ -49,11 +64,10 @@ bool same_change(const TraceChange& split, const TraceChange& serial) {
                 return false;
             const auto n = part.cell_begin[r + 1] - part.cell_begin[r];
             if (n != serial.cell_begin[k + 1] - serial.cell_begin[k]) return false;
-            for (std::int32_t c = 0; c < n; ++c) {
-                const CellCrossing& a = part.cells[std::size_t(part.cell_begin[r] + c)];
-                const CellCrossing& b = serial.cells[std::size_t(serial.cell_begin[k] + c)];
-                if (a.cell != b.cell || a.zlo != b.zlo || a.zhi != b.zhi) return false;
-            }
+            for (std::int32_t c = 0; c < n; ++c)
+                if (!same_crossing(part.cells[std::size_t(part.cell_begin[r] + c)],
+                                   serial.cells[std::size_t(serial.cell_begin[k] + c)]))
+                    return false;
         }
     }
     return k == serial.rays.size() && split.ray_count() == serial.rays.size();
@@ -178,30 +192,16 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         CHECK(off_scalar == 0);
         // The rays left out as out of reach kept their cells and height ranges: the
         // maintained index is the rebuilt one, range for range.
-        std::int64_t differ = 0;
-        for (std::int32_t r = 0; r < std::int32_t(rays.size()); ++r) {
-            const auto a = fresh.index().cells_of(r), b = inc.index().cells_of(r);
-            bool same = a.size() == b.size();
-            for (std::size_t k = 0; same && k < a.size(); ++k)
-                same = a[k].cell == b[k].cell && a[k].zlo == b[k].zlo && a[k].zhi == b[k].zhi;
-            differ += same ? 0 : 1;
-        }
-        CHECK(differ == 0);
+        CHECK(rays_with_other_cells(fresh, inc) == 0);
         // The twin, committed in parts, holds the same records, cells and per-cell lists
         // (in the same order) as the serial commits.
         CHECK(twin.records() == inc.records());
         CHECK(twin.weight_by_status() == inc.weight_by_status());
-        std::int64_t twin_differ = 0;
-        for (std::int32_t r = 0; r < std::int32_t(rays.size()); ++r) {
-            const auto a = twin.index().cells_of(r), b = inc.index().cells_of(r);
-            bool same = a.size() == b.size();
-            for (std::size_t k = 0; same && k < a.size(); ++k)
-                same = a[k].cell == b[k].cell && a[k].zlo == b[k].zlo && a[k].zhi == b[k].zhi;
-            twin_differ += same ? 0 : 1;
-        }
+        CHECK(rays_with_other_cells(twin, inc) == 0);
+        std::int64_t lists_differ = 0;
         for (std::int32_t cell = 0; cell < std::int32_t((hm.nx() - 1) * (hm.ny() - 1)); ++cell)
-            twin_differ += twin.index().rays_of(cell) == inc.index().rays_of(cell) ? 0 : 1;
-        CHECK(twin_differ == 0);
+            lists_differ += twin.index().rays_of(cell) == inc.index().rays_of(cell) ? 0 : 1;
+        CHECK(lists_differ == 0);
         // The bumps (up to 40 % of the slab) leave paths above and below them: some rays
         // listed on a move's cells are out of its reach, and most are not.
         MESSAGE(std::string(c.name), ": ", culled, " of ", listed, " listed rays out of reach");
