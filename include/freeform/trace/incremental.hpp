@@ -684,8 +684,6 @@ private:
     }
 #endif
 
-    // Stores the new record of change.rays[k] and, if it differs from the maintained one,
-    // moves the ray's weight.
     // If ray `id`'s new record differs from the maintained one, moves its weight (in `out`).
     void account(std::int32_t id, const RayRecord& now, TracePart& out) const {
         const RayRecord& before = records_[std::size_t(id)];
