@@ -770,17 +770,22 @@ private:
         const std::int32_t first_slot = (j_begin - cells.j0) * cells.width();
         const auto& slot = change.cell_slot;
         enum class Verdict { earlier, reach, out_of_reach };
+        // A ray's cells are sorted by id, and the move's slots follow cell ids (both row
+        // major), so the first of its cells in the move has its smallest slot: that one
+        // alone says whether an earlier part has the ray, and the first cell in reach
+        // settles the rest.
         const auto judge = [&](std::int32_t id) {
-            bool reach = false;
+            bool first = true;
             for (const CellCrossing& c : index_.cells_of(id)) {
                 const std::int32_t k = slot[std::size_t(c.cell)];
                 if (k < 0) continue;
-                if (k < first_slot) return Verdict::earlier;
+                if (first && k < first_slot) return Verdict::earlier;
+                first = false;
                 const TraceChange::CellReach& r = change.reach[std::size_t(k)];
-                reach = reach || (c.zlo <= r.hi_before && c.zhi >= r.lo_before) ||
-                        (c.zlo <= r.hi_after && c.zhi >= r.lo_after);
+                if ((c.zlo <= r.hi_before && c.zhi >= r.lo_before) || (c.zlo <= r.hi_after && c.zhi >= r.lo_after))
+                    return Verdict::reach;
             }
-            return reach ? Verdict::reach : Verdict::out_of_reach;
+            return Verdict::out_of_reach;
         };
         for (int cj = j_begin; cj < j_end; ++cj)
             for (int ci = cells.i0; ci <= cells.i1; ++ci) {
