@@ -140,8 +140,9 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         std::int64_t moved = 0, culled = 0, listed = 0;
         for (int it = 0; it < 2500; ++it) {
             random_bump(hm, rng, o);
+            const bool accept = rng.uniform() < 0.4;
             inc.evaluate(o, change);
-            twin.evaluate(o, twin_change, &pool);
+            if (accept) twin.evaluate(o, twin_change, &pool);  // the twin sees only the moves it commits
             if (it % 4 == 0) {
                 // The same move retraced by three threads, each a range of its rays: the
                 // same change bit for bit.
@@ -151,7 +152,7 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
             }
             culled += change.rays_culled;
             listed += change.rays_culled + std::int64_t(change.rays.size());
-            if (rng.uniform() < 0.4) {
+            if (accept) {
                 o.commit(hm);
                 inc.commit(change);
                 twin.commit(twin_change, &pool);
