@@ -819,14 +819,17 @@ private:
         const Splat a = was ? splat(params_.receiver, before.px, before.py, w) : Splat{};
         const Splat b = is ? splat(params_.receiver, now.px, now.py, w) : Splat{};
         if (was && is && a.cell[0] == b.cell[0] && a.cell[3] == b.cell[3]) {  // the same four cells
+#pragma GCC unroll 4
             for (int k = 0; k < 4; ++k)
                 if (b.amount[k] != a.amount[k]) d.add(a.cell[k], b.amount[k] - a.amount[k]);
             return;
         }
         if (was)
+#pragma GCC unroll 4
             for (int k = 0; k < 4; ++k)
                 if (a.amount[k] != 0) d.add(a.cell[k], -a.amount[k]);
         if (is)
+#pragma GCC unroll 4
             for (int k = 0; k < 4; ++k)
                 if (b.amount[k] != 0) d.add(b.cell[k], b.amount[k]);
     }
