@@ -81,10 +81,9 @@ public:
         return true;
     }
 
-    // Replaces a ray's cells (and their height ranges), touching only the cell lists that
-    // differ.
-    void replace(std::int32_t ray, std::span<const CellCrossing> cells) {
-        if (update_ranges(ray, cells)) return;
+    // Replaces the cells of a ray whose cells changed (update_ranges said no): moves the
+    // ray between the per-cell lists that differ, then stores the cells and their ranges.
+    void relist(std::int32_t ray, std::span<const CellCrossing> cells) {
         const auto old = cells_of(ray);
         const auto has = [](std::span<const CellCrossing> list, std::int32_t cell) {
             return std::find_if(list.begin(), list.end(), [&](const CellCrossing& c) { return c.cell == cell; }) !=
@@ -286,6 +285,12 @@ struct TraceChange : TracePart {
     std::vector<std::unique_ptr<TracePart>> parts;  // room for parts 1, 2, ... of a split
     int split = 1;  // parts that hold this change's rays: part(0) .. part(split - 1)
 
+    // Empties the change: one part, no rays (see TracePart::reset_part).
+    void reset(std::int64_t ray_count, std::int64_t receiver_cells) {
+        reset_part(ray_count, receiver_cells);
+        split = 1;
+    }
+
     // Part p of the rays (0: this object), in the serial order of the selection.
     const TracePart& part(int p) const {
         return p == 0 ? static_cast<const TracePart&>(*this) : *parts[std::size_t(p - 1)];
@@ -453,8 +458,7 @@ public:
     // Retraces every ray against the surface with `o` applied: the reference's full
     // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
     void evaluate_all(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {
-        change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-        change.split = 1;
+        change.reset(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         change.rays.resize(std::size_t(rays_->size()));
         for (std::size_t k = 0; k < change.rays.size(); ++k) change.rays[k] = std::int32_t(k);
         const OverlayView view = overlay_view(*surface_, o);
@@ -472,41 +476,35 @@ public:
 
     // Makes an evaluated change part of the state (the caller commits the heights).
     //
-    // With a pool, a change evaluated in parts is committed in parts too: the pool's
-    // threads store the records of each part's rays, and the cells of those that cross the
-    // same cells as before (most of them), each in its own slots; the caller then moves the
-    // rays whose cells changed in the shared per-cell lists, in order. The state is the
-    // serial commit's, lists included. Why: a part's records and cells sit in the cache of
-    // the thread that traced them, and the caller storing them one by one waited on the
-    // other core's cache for each (perf: a fifth of the caller's time with two threads).
+    // Each part's records are stored, and the cells of its rays that cross the same cells
+    // as before (most of them), each in the ray's own slot; then the rays whose cells
+    // changed are moved in the shared per-cell lists, in order. With a pool, a change
+    // evaluated in parts has its parts stored by the pool's threads: a part's records and
+    // cells sit in the cache of the thread that traced them, and the caller storing them
+    // one by one waited on the other core's cache for each (perf: a fifth of the caller's
+    // time with two threads). The state is the same either way, lists included.
     void commit(const TraceChange& change, TaskPool* pool = nullptr) {
         const auto cells_of = [](const TracePart& part, std::size_t k) {
             return std::span(part.cells.data() + part.cell_begin[k],
                              std::size_t(part.cell_begin[k + 1] - part.cell_begin[k]));
         };
-        if (pool == nullptr || pool->threads() < 2 || change.split < 2) {
-            for (int p = 0; p < change.split; ++p) {
-                const TracePart& part = change.part(p);
-                for (std::size_t k = 0; k < part.rays.size(); ++k) {
-                    records_[std::size_t(part.rays[k])] = part.records[k];
-                    index_.replace(part.rays[k], cells_of(part, k));
-                }
+        if (int(relisted_.size()) < change.split) relisted_.resize(std::size_t(change.split));
+        const auto store_part = [&](int p) {
+            const TracePart& part = change.part(p);
+            auto& later = relisted_[std::size_t(p)];
+            later.clear();
+            for (std::size_t k = 0; k < part.rays.size(); ++k) {
+                records_[std::size_t(part.rays[k])] = part.records[k];
+                if (!index_.update_ranges(part.rays[k], cells_of(part, k))) later.push_back(k);
             }
-        } else {
-            if (int(relisted_.size()) < change.split) relisted_.resize(std::size_t(change.split));
-            run_parts(*pool, change.split, [&](int p) {
-                const TracePart& part = change.part(p);
-                auto& later = relisted_[std::size_t(p)];
-                later.clear();
-                for (std::size_t k = 0; k < part.rays.size(); ++k) {
-                    records_[std::size_t(part.rays[k])] = part.records[k];
-                    if (!index_.update_ranges(part.rays[k], cells_of(part, k))) later.push_back(k);
-                }
-            });
-            for (int p = 0; p < change.split; ++p)
-                for (std::size_t k : relisted_[std::size_t(p)])
-                    index_.replace(change.part(p).rays[k], cells_of(change.part(p), k));
-        }
+        };
+        if (pool != nullptr && change.split > 1)
+            run_parts(*pool, change.split, store_part);
+        else
+            for (int p = 0; p < change.split; ++p) store_part(p);
+        for (int p = 0; p < change.split; ++p)
+            for (std::size_t k : relisted_[std::size_t(p)])
+                index_.relist(change.part(p).rays[k], cells_of(change.part(p), k));
         for (std::size_t s = 0; s < status_weight_.size(); ++s) status_weight_[s] += change.status_delta[s];
     }
 
@@ -516,8 +514,7 @@ private:
     // the selection (the thread that selected it) once its rays are listed.
     template <class PerPart>
     bool select_rays(const HeightOverlay& o, TraceChange& change, TaskPool* pool, PerPart&& per_part) const {
-        change.reset_part(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
-        change.split = 1;
+        change.reset(rays_->size(), std::int64_t(params_.receiver.width) * params_.receiver.height);
         if (o.empty()) {
             change.cell_begin.push_back(0);
             return false;
