@@ -112,7 +112,7 @@ TEST_CASE("the GPU tracer's record kernel gives HeightfieldTracer's records unde
 }
 
 TEST_CASE("the GPU tracer's trace-and-deposit kernel equals HeightfieldTracer::trace_all, serial and parallel") {
-    for (const Deposit d : {Deposit::nearest, Deposit::bilinear}) {
+    for (const Deposit d : {Deposit::nearest, Deposit::bilinear, Deposit::fine_bilinear}) {
         const WavyScene w = wavy_scene(d);
         const PathParams pp = make_path_params(w.scene);
         const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::omp);

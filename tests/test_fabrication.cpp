@@ -95,13 +95,31 @@ TEST_CASE("facets approach the patches as 1/k, and the tolerance picks the small
     CHECK(subdivisions_for_tolerance(hm, 0.0, 1e-9, 16, 0.9).k == 1);  // flat facets are exact
 }
 
-TEST_CASE("facet tolerance: a quarter of a receiver cell of light displacement") {
+TEST_CASE("facet tolerance: a twentieth of a receiver cell of light displacement") {
     Scene s = basic_scene(200);  // 1 mm cells, receiver 0.5 m away
-    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.25e-3 / 1.0));
+    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.05e-3 / 1.0));
     s.optimise.export_tolerance = 0.5;
     CHECK(facet_normal_tolerance(s) == doctest::Approx(0.5e-3));
     s.surface.material = Lens{1.5, 0.01};  // a face of index 1.5 deflects a quarter as much
     CHECK(facet_normal_tolerance(s) == doctest::Approx(2e-3));
+}
+
+TEST_CASE("the automatic level keeps the exported mesh within its triangle budget") {
+    Scene s = basic_scene(100);
+    const Heightmap hm = surface_for(s, 21);  // 400 cells: k² · 800 triangles
+    CHECK(subdivisions_for_triangles(hm, 800) == 1);
+    CHECK(subdivisions_for_triangles(hm, 3199) == 1);
+    CHECK(subdivisions_for_triangles(hm, 3200) == 2);
+    CHECK(subdivisions_for_triangles(hm, 100) == 1);  // never below one facet pair a cell
+    s.optimise.export_tolerance = 0.01;                // asks for more than the budget allows
+    s.optimise.export_max_triangles = 20'000;          // k ≤ 5
+    s.surface.phong_alpha = 0.5;                       // curved patches (flat ones need k = 1)
+    Heightmap curved = hm;
+    shape(curved, [](double u, double v) { return 0.002 * std::sin(140 * u) * std::cos(100 * v); });
+    const Fabrication f = make_fabrication(s, curved);
+    CHECK(f.subdivisions == 5);
+    CHECK(f.mesh.triangles.size() <= 20'000u);
+    CHECK(f.normal_error > f.normal_tolerance);  // the budget, not the tolerance, set k
 }
 
 #if defined(FREEFORM_WITH_EMBREE)

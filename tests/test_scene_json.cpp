@@ -113,7 +113,7 @@ TEST_CASE("a minimal scene gets every documented default") {
     CHECK(s.receiver.size.x == 0.2);
     CHECK(s.receiver.width == 200);
     CHECK(s.receiver.height == 200);
-    CHECK(s.receiver.deposit == Deposit::bilinear);
+    CHECK(s.receiver.deposit == Deposit::fine_bilinear);
 
     CHECK_FALSE(s.target.has_value());
     CHECK(s.meshes.empty());
@@ -293,7 +293,7 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
          "light.center: ",
          "in front"},
         {"bad enum", {{"surface", {{"aperture", "circle"}}}}, "surface.aperture: ", R"("rect", "ellipse")"},
-        {"bad deposit", {{"receiver", {{"deposit", 3}}}}, "receiver.deposit: ", R"("bilinear", "nearest")"},
+        {"bad deposit", {{"receiver", {{"deposit", 3}}}}, "receiver.deposit: ", R"("fine_bilinear", "bilinear", "nearest")"},
         {"bad tracer", {{"trace", {{"tracer", "optix"}}}}, "trace.tracer: ", R"("auto", "heightfield", "embree")"},
         {"mesh too small", {{"surface", {{"mesh", {1, 10}}}}}, "surface.mesh[0]: ", "must be an integer in [2, "},
         {"negative mesh", {{"surface", {{"mesh", {10, -5}}}}}, "surface.mesh[1]: ", "got -5"},

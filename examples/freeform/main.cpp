@@ -30,6 +30,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <freeform/design/cell_means.hpp>
 #include <freeform/design/designer.hpp>
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/report_json.hpp>
@@ -215,12 +216,25 @@ json totals_json(const TraceTotals& t) {
     return j;
 }
 
-double l1_error(std::span<const Fixed> a, std::span<const Fixed> b, Fixed total) {
-    std::int64_t s = 0;
-    for (std::size_t k = 0; k < a.size(); ++k) s += std::llabs(a[k] - b[k]);
-    return double(s) / (2.0 * double(total));
+// Cell means for error_physical (docs/measures.md): rays of their own jitter, not the
+// design's, so the figure is not the one the design was fitted to.
+CellMeanOptions cell_mean_options(std::uint64_t seed) {
+    CellMeanOptions o;
+    o.seed = hash_combine(seed, 0x63656c6c6d65616eULL);
+    return o;
 }
-double l1_error(const Histogram& h, const Target& t) { return l1_error(h.cells, t.cells, t.total); }
+
+json cell_means_json(const CellMeans& c, const std::string& traced) {
+    json j;
+    j["traced"] = traced;
+    j["deposit"] = "nearest";
+    j["rays_per_cell"] = c.rays_per_cell;
+    j["rays"] = c.rays;
+    j["batches"] = c.batches;
+    j["change_on_doubling"] = c.change_on_doubling;
+    j["converged"] = c.converged;
+    return j;
+}
 
 ImageD target_image_of(const Target& t) {
     ImageD img(t.height, t.width);
@@ -320,39 +334,53 @@ int run_render(const RenderArgs& a) {
         }
     }
 
-    RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
     if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
         throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
-    PathParams pp = make_path_params(scene);
-    // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
-    if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
-    // A refractive solid is the whole lens: the scene's lens model (its flat back face)
-    // does not apply (and the beam starts above the solid, below).
-    if (mesh_material) pp.material = MaterialView{};
-    pp.interpolated_normals = a.mesh_normals;
     const int threads = thread_count(exec::omp_t{a.threads});
     StatusLine status(true);
-    RenderOutcome r;
-    if (decision.tracer == TracerChoice::heightfield) {
-        r = render_with(HeightfieldTracer(surface, rays, pp), rays, threads, status);
-    } else {
+    // Traces `rays` through what is rendered, with the receiver of `sc` (the scene, or
+    // its nearest-deposit twin for the cell means).
+    const auto trace = [&](const Scene& sc, RaySet& rays) {
+        PathParams pp = make_path_params(sc);
+        // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
+        if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
+        // A refractive solid is the whole lens: the scene's lens model (its flat back face)
+        // does not apply (and the beam starts above the solid, below).
+        if (mesh_material) pp.material = MaterialView{};
+        pp.interpolated_normals = a.mesh_normals;
+        if (decision.tracer == TracerChoice::heightfield)
+            return render_with(HeightfieldTracer(surface, rays, pp), rays, threads, status);
 #if defined(FREEFORM_WITH_EMBREE)
         std::vector<ExtraMesh> extras;
         for (std::size_t k = 0; k < extra.size(); ++k)
-            extras.push_back(to_surface_frame(extra[k], scene.surface.frame, scene.meshes[k].material));
+            extras.push_back(to_surface_frame(extra[k], sc.surface.frame, sc.meshes[k].material));
         if (mesh && mesh_material) {
-            ExtraMesh solid = to_surface_frame(*mesh, scene.surface.frame, *mesh_material);
-            start_above(scene.light, scene.surface.size, solid.mesh, rays);
+            ExtraMesh solid = to_surface_frame(*mesh, sc.surface.frame, *mesh_material);
+            start_above(sc.light, sc.surface.size, solid.mesh, rays);
             extras.insert(extras.begin(), std::move(solid));
-            r = render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, status);
-        } else if (mesh) {
-            const ExtraMesh local = to_surface_frame(*mesh, scene.surface.frame, true);
-            r = render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, status);
-        } else {
-            r = render_with(EmbreeTracer(surface, rays, pp, std::move(extras)), rays, threads, status);
+            return render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, status);
         }
+        if (mesh) {
+            const ExtraMesh local = to_surface_frame(*mesh, sc.surface.frame, true);
+            return render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, status);
+        }
+        return render_with(EmbreeTracer(surface, rays, pp, std::move(extras)), rays, threads, status);
+#else
+        return RenderOutcome{};  // choose_tracer never picks Embree in a build without it
 #endif
-    }
+    };
+    RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
+    const RenderOutcome r = trace(scene, rays);
+    // With a target: the cell means of what was rendered (error_physical, docs/measures.md).
+    std::optional<CellMeans> cells;
+    if (target)
+        cells = converged_cell_means(scene, surface, &*target, cell_mean_options(scene.optimise.seed),
+                                     [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
+                                         RaySet own = batch;
+                                         RenderOutcome o = trace(sc, own);
+                                         h = std::move(o.histogram);
+                                         tt = o.totals;
+                                     });
 
     json m;
     m["command"] = "render";
@@ -374,22 +402,31 @@ int run_render(const RenderArgs& a) {
     if (mesh)
         m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
                                            : json("the scene's surface material");
-    const ImageD irradiance = r.histogram.to_image();
     std::optional<Target> t;
     if (target) {
         t = make_target(*target, scene.receiver.width, scene.receiver.height, rays.total);
         m["error"] = l1_error(r.histogram, *t);
+        m["error_physical"] = cells->error;
+        m["energy_physical"] = cells->totals.energy();
+        m["cell_means"] = cell_means_json(*cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
     }
     if (start) m["start"] = start_report_json(*start);
     m["effective_scene"] = scene_to_json(scene);
 
+    // irradiance.pfm is the render with the scene's deposit and rays; the PNGs show cell
+    // means where a target asked for them.
+    const ImageD irradiance = r.histogram.to_image();
+    const ImageD shown = cells ? cells->histogram.to_image() : irradiance;
     fs::create_directories(a.out);
     io::write_pfm(a.out / "irradiance.pfm", irradiance.cast<float>());
-    io::write_png(a.out / "irradiance.png", io::tone_map(irradiance));
-    if (t) io::write_png(a.out / "comparison.png", comparison_image(irradiance, target_image_of(*t)));
+    io::write_png(a.out / "irradiance.png", io::tone_map(shown));
+    if (cells) io::write_png(a.out / "comparison.png", comparison_image(shown, target_image_of(cells->target)));
     write_json(a.out / "metrics.json", m);
     std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(decision.tracer),
                 decision.reason.c_str());
+    if (cells)
+        std::printf("  error_physical %.4f, energy %.4f: cell means, nearest deposit, %.0f rays per cell\n",
+                    cells->error, cells->totals.energy(), cells->rays_per_cell);
     std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
                 r.totals.energy(), t ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
                 m["rays_per_second"].get<double>() / 1e6);
@@ -680,8 +717,6 @@ int run_design(const DesignArgs& a) {
         csv << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
             << c.energy << ',' << c.objective << ',' << c.temperature << '\n';
 
-    const ImageD irradiance = hist.to_image();
-    const ImageD target_img = target_image_of(t);
     // The exported part, and what it does when traced as its flat facets.
     if (!quiet) status.show("exporting the surface and tracing the exported mesh");
     const Fabrication fabrication = make_fabrication(scene, result.surface);
@@ -693,6 +728,11 @@ int run_design(const DesignArgs& a) {
     exported["facet_normal_tolerance_mrad"] = fabrication.normal_tolerance * 1e3;
     exported["triangles"] = fab.triangles.size();
     std::optional<double> error_exported;
+    // The images show cell means of the exported part where it can be traced (Embree),
+    // else the design's own irradiance.
+    ImageD irradiance = hist.to_image();
+    ImageD target_img = target_image_of(t);
+    std::optional<CellMeans> cells;
 #if defined(FREEFORM_WITH_EMBREE)
     {
         const ExportedTrace et =
@@ -701,9 +741,18 @@ int run_design(const DesignArgs& a) {
         m["error_exported"] = *error_exported;
         m["energy_exported"] = et.totals.energy();
         exported["l1_to_design_irradiance"] = l1_error(et.histogram.cells, hist.cells, rays.total);
+        if (!quiet) status.show("cell means of the exported mesh (error_physical)");
+        cells = exported_cell_means(exec::omp_t{options.threads}, scene, result.surface, fabrication.subdivisions,
+                                    &target, cell_mean_options(options.seed));
+        m["error_physical"] = cells->error;
+        m["energy_physical"] = cells->totals.energy();
+        m["cell_means"] = cell_means_json(*cells, "the exported surface.obj traced as flat triangles");
+        irradiance = cells->histogram.to_image();
+        target_img = target_image_of(cells->target);
     }
 #else
     m["error_exported"] = nullptr;
+    m["error_physical"] = nullptr;
     exported["not_traced"] = "built without Embree";
 #endif
     status.finish();
@@ -723,20 +772,17 @@ int run_design(const DesignArgs& a) {
     io::write_obj(a.out / "surface.obj", fab);
     io::write_stl(a.out / "surface.stl", fab);
     if (!a.quiet || true) {
-        std::printf("%s: error %.4f, energy %.4f after %lld iterations in %.1f s (%.0f it/s)%s\n",
-                    result.stopped_early ? "interrupted" : "done", error, totals.energy(),
+        std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
                     (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                     result.stopped_early ? " -- best result so far written" : "");
-        if (error_held_out)
-            std::printf("  with rays it was not fitted to: error %.4f%s\n", *error_held_out,
-                        *error_held_out > 1.1 * error
-                            ? " (well above: the design fits its rays' sampling noise; more light.rays_per_cell "
-                              "would help)"
-                            : "");
-        if (error_exported)
-            std::printf("  exported mesh (%zu triangles, %d x %d facets per cell) traced as flat triangles: error "
-                        "%.4f\n",
-                        fab.triangles.size(), fabrication.subdivisions, fabrication.subdivisions, *error_exported);
+        if (cells)
+            std::printf("  error_physical %.4f, energy %.4f: cell means of the exported mesh (%zu triangles) traced as "
+                        "flat triangles, %.0f rays per cell\n",
+                        cells->error, cells->totals.energy(), fab.triangles.size(), cells->rays_per_cell);
+        std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, totals.energy());
+        if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
+        if (error_exported) std::printf("; exported mesh with the design's rays %.4f", *error_exported);
+        std::printf(" (docs/measures.md)\n");
         const StartReport& st = result.start;
         std::printf("  start: %s%s%s", st.used.c_str(),
                     st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",

@@ -16,6 +16,7 @@
 #include "../surface/export.hpp"
 #include "../trace/embree.hpp"
 #include "../trace/setup.hpp"
+#include "cell_means.hpp"
 
 namespace freeform {
 
@@ -24,30 +25,61 @@ struct ExportedTrace {
     TraceTotals totals;
 };
 
+// The exported part as Embree traces it: the mirror's sheet, or the lens's closed solid.
+struct ExportedGeometry {
+    TriangleMesh mesh;  // surface frame
+    std::optional<double> solid_ior;  // a lens: the mesh is a refractive solid of this index
+};
+
+inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, int subdivisions) {
+    const float alpha = float(scene.surface.phong_alpha);
+    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material))
+        return {lens_solid(surface, *lens, alpha, subdivisions, false), lens->ior};
+    return {tessellate_surface(surface, alpha, subdivisions, false), std::nullopt};
+}
+
+// Traces `rays` (aimed at `surface`'s aperture) through the exported geometry with the
+// scene's receiver (its deposit included).
 template <HostPolicy P>
-ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
-                             const RaySet& rays) {
+ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometry& geometry, const RaySet& rays) {
     PathParams pp = make_path_params(scene);
     pp.phong_alpha = 0.0f;  // flat facets: the mesh is its geometry
     pp.interpolated_normals = false;
-    const float alpha = float(scene.surface.phong_alpha);
     RaySet lens_rays;  // outlives the tracer, which refers to it
     std::optional<EmbreeTracer> tracer;
-    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) {
+    if (geometry.solid_ior) {
         // The solid replaces the lens model; a collimated beam starts above its top.
-        TriangleMesh solid = lens_solid(surface, *lens, alpha, subdivisions, false);
         lens_rays = rays;
-        start_above(scene.light, scene.surface.size, solid, lens_rays);
+        start_above(scene.light, scene.surface.size, geometry.mesh, lens_rays);
         pp.material = MaterialView{};
         std::vector<ExtraMesh> meshes;
-        meshes.push_back(ExtraMesh{std::move(solid), MeshMaterial::refractive(lens->ior)});
+        meshes.push_back(ExtraMesh{geometry.mesh, MeshMaterial::refractive(*geometry.solid_ior)});
         tracer.emplace(lens_rays, pp, std::move(meshes));
     } else {
-        tracer.emplace(tessellate_surface(surface, alpha, subdivisions, false), rays, pp);
+        tracer.emplace(geometry.mesh, rays, pp);
     }
     ExportedTrace out{Histogram(scene.receiver.width, scene.receiver.height), {}};
     tracer->trace_all(policy, out.histogram, out.totals);
     return out;
+}
+
+template <HostPolicy P>
+ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
+                             const RaySet& rays) {
+    return trace_exported(policy, scene, exported_geometry(scene, surface, subdivisions), rays);
+}
+
+// The cell means of the exported part (cell_means.hpp): what `error_physical` reports.
+template <HostPolicy P>
+CellMeans exported_cell_means(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
+                              const ImageD* target, const CellMeanOptions& options) {
+    const ExportedGeometry geometry = exported_geometry(scene, surface, subdivisions);
+    return converged_cell_means(scene, surface, target, options,
+                                [&](const Scene& s, const RaySet& rays, Histogram& h, TraceTotals& t) {
+                                    ExportedTrace et = trace_exported(policy, s, geometry, rays);
+                                    h = std::move(et.histogram);
+                                    t = et.totals;
+                                });
 }
 
 }  // namespace freeform

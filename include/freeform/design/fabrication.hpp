@@ -10,15 +10,12 @@
 // both at small angles). The
 // "auto" level is the smallest k whose facets stay within δ_max = tol · cell / (gD) of
 // the patch normals for 90 % of the facets (tessellation_normal_error), with tol the
-// scene's optimise.export_tolerance in receiver cells (0.25 by default) and cell the
-// receiver's smaller cell size. Not 100 %: a designed surface's curvature has a long
-// tail (the letter E's transport start: 90th percentile 0.85 mrad at k = 1, maximum
-// 20 mrad), on the few cells where the map tears the light apart, and those cells spread
-// their light thinly, so their facets' errors weigh little on the receiver. Measured on
-// that start (/tmp experiment recorded in README "What gets milled"): k = 1, 2, 4, 8 give
-// an exported error of 0.076, 0.061, 0.052, 0.051 against the simulated 0.050, and the
-// rule picks 4. The check that matters is the traced one: design/exported.hpp gives the
-// error a user's milled part will have (error_exported in metrics.json).
+// scene's optimise.export_tolerance in receiver cells (0.05 by default) and cell the
+// receiver's smaller cell size, and within the triangle budget below. Not 100 %: a
+// designed surface's curvature has a long tail (the letter E's transport start: 90th
+// percentile 0.85 mrad at k = 1, maximum 20 mrad), and the worst facets set no level.
+// The check that matters is the traced one: design/exported.hpp gives the cell-mean
+// error a user's milled part will have (error_physical in metrics.json).
 #include <algorithm>
 #include <cmath>
 #include <variant>
@@ -47,13 +44,28 @@ struct Fabrication {
     double normal_tolerance = 0;  // δ_max, radians
 };
 
-// Upper bound of the "auto" level: 128 facets per cell, 1.3 million for a 101 × 101
-// design (a 64 MB binary STL). A surface that needs more says so in normal_error, and
-// error_exported shows what it costs. Measured on the example cases' transport starts
-// (Phong α ½, `freeform design CASE --start-only`): "auto" picks k = 2 (camera) to 5
-// (point light), and the exported mesh's irradiance is within L1 0.005-0.014 of the
-// design's.
-inline constexpr int max_auto_subdivisions = 8;
+// Upper bound of the "auto" level. The level is also held to the scene's
+// optimise.export_max_triangles (4 million by default: a 200 MB binary STL), so the
+// surface's own mesh decides how fine the facets can be: k² ≤ max / (2 · cells).
+//
+// Why so fine: error_physical (cell means, docs/measures.md) sees every displacement of
+// light across a cell edge, and facets displace it most where the surface is most
+// curved, the tail that a quantile of the normal error hides. Measured on designs of the
+// letter E (101², 20 s) and the camera photograph (401², 60 s), `design --start-only`
+// with the design's heightmap as `initial` and a fixed export_subdivisions: the E's
+// exported error_physical is 0.0445 at k = 3 (the former default tolerance of 0.25
+// cells), 0.0343 at 8 and 0.0331 at 14 against 0.0322 for the simulated surface; the
+// camera's 0.0399 at k = 2, 0.0334 at 4 against 0.0320 (docs/measures.md).
+inline constexpr int max_auto_subdivisions = 16;
+
+// The largest k whose mesh stays within `max_triangles` (at least 1).
+inline int subdivisions_for_triangles(const Heightmap& surface, std::int64_t max_triangles) {
+    std::int64_t cells = 0;
+    for (int j = 0; j + 1 < surface.ny(); ++j)
+        for (int i = 0; i + 1 < surface.nx(); ++i) cells += surface.cell_active(i, j) ? 1 : 0;
+    if (cells == 0) return 1;
+    return std::max(1, int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))));
+}
 
 inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface) {
     Fabrication f;
@@ -61,8 +73,9 @@ inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface
     f.normal_tolerance = facet_normal_tolerance(scene);
     f.automatic = scene.optimise.export_subdivisions <= 0;
     if (f.automatic) {
-        const SubdivisionChoice c =
-            subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_auto_subdivisions);
+        const int max_k = std::min(max_auto_subdivisions,
+                                   subdivisions_for_triangles(surface, scene.optimise.export_max_triangles));
+        const SubdivisionChoice c = subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_k);
         f.subdivisions = c.k;
         f.normal_error = c.normal_error;
     } else {

@@ -311,8 +311,8 @@ inline json vec_json(Vec2d v) { return json::array({v.x, v.y}); }
 
 inline constexpr std::array<EnumName<Aperture>, 2> aperture_names{
     {{"rect", Aperture::rect}, {"ellipse", Aperture::ellipse}}};
-inline constexpr std::array<EnumName<Deposit>, 2> deposit_names{
-    {{"bilinear", Deposit::bilinear}, {"nearest", Deposit::nearest}}};
+inline constexpr std::array<EnumName<Deposit>, 3> deposit_names{
+    {{"fine_bilinear", Deposit::fine_bilinear}, {"bilinear", Deposit::bilinear}, {"nearest", Deposit::nearest}}};
 inline constexpr std::array<EnumName<TracerChoice>, 3> tracer_names{
     {{"auto", TracerChoice::automatic}, {"heightfield", TracerChoice::heightfield}, {"embree", TracerChoice::embree}}};
 inline constexpr std::array<EnumName<MeshKind>, 2> mesh_material_names{
@@ -821,6 +821,11 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"export_tolerance",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.export_tolerance = number_in(v, p, 0.01, 10); },
          [](const OptimiseSpec& o, json& j) { j["export_tolerance"] = o.export_tolerance; }},
+        {"export_max_triangles",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.export_max_triangles = integer(v, p, 1000, 1'000'000'000);
+         },
+         [](const OptimiseSpec& o, json& j) { j["export_max_triangles"] = o.export_max_triangles; }},
     };
     return table;
 }

@@ -118,8 +118,9 @@ struct OptimiseSpec {
     // Output.
     int smooth_iterations = 0;        // post-processing passes of smooth_heights
     int export_subdivisions = 0;      // tessellation level k of the exported mesh; 0 = "auto"
-    double export_tolerance = 0.25;   // "auto": light of a facet lands within this many receiver
+    double export_tolerance = 0.05;   // "auto": light of a facet lands within this many receiver
                                       // cells of where the simulated patch sends it
+    std::int64_t export_max_triangles = 4'000'000;  // "auto": k no larger than this allows
     std::int64_t progress_every = 2000;
 };
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "../core/deposit.hpp"
 #include "../core/fixed_point.hpp"
 #include "../core/hd.hpp"
 #include "../core/math.hpp"
@@ -41,7 +42,7 @@ struct ReceiverView {
     Vec3 center{}, u{}, v{}, n{};  // n: front normal (facing the arriving light)
     float inv_cell_u = 1, inv_cell_v = 1;
     int width = 1, height = 1;
-    bool bilinear = true;
+    Deposit deposit = Deposit::fine_bilinear;
 
     // Continuous pixel coordinates where the ray (o, d) meets the receiver's front.
     FREEFORM_HD bool hit(Vec3 o, Vec3 d, float& px, float& py) const {
@@ -56,7 +57,7 @@ struct ReceiverView {
     }
 };
 
-// A ray's weight split over receiver cells: the four bilinear cells (which repeat at the
+// A ray's weight split over receiver cells: the four cells around it (which repeat at the
 // receiver's edges), or one cell with the whole weight and three empty shares. The
 // amounts always sum to exactly the weight, so energy is conserved to the last bit.
 struct Splat {
@@ -66,7 +67,7 @@ struct Splat {
 
 FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed w) {
     Splat s;
-    if (!rv.bilinear) {
+    if (rv.deposit == Deposit::nearest) {
         int x = int(px), y = int(py);
         x = x < rv.width ? x : rv.width - 1;
         y = y < rv.height ? y : rv.height - 1;
@@ -80,7 +81,14 @@ FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed
     int x0 = int(sx), y0 = int(sy);
     x0 -= sx < float(x0) ? 1 : 0;
     y0 -= sy < float(y0) ? 1 : 0;
-    const double fx = double(sx - float(x0)), fy = double(sy - float(y0));
+    double fx = double(sx - float(x0)), fy = double(sy - float(y0));
+    if (rv.deposit == Deposit::fine_bilinear) {
+        // Bilinear between the centres of a grid twice as fine, summed into cells: the
+        // share of the next cell is 0 up to a quarter cell before the cells' common edge,
+        // 1/2 on it, 1 a quarter cell past it (core/deposit.hpp).
+        fx = fx < 0.25 ? 0.0 : fx > 0.75 ? 1.0 : 2.0 * fx - 0.5;
+        fy = fy < 0.25 ? 0.0 : fy > 0.75 ? 1.0 : 2.0 * fy - 0.5;
+    }
     int x1 = x0 + 1, y1 = y0 + 1;
     x0 = x0 < 0 ? 0 : x0;
     y0 = y0 < 0 ? 0 : y0;
@@ -102,11 +110,11 @@ FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed
 }
 
 // Splits a ray's weight over receiver cells: calls add(cell_index, amount) for each
-// share of splat() (the first only without bilinear deposits: the others are empty).
+// share of splat() (the first only for nearest deposits: the others are empty).
 template <class Add>
 FREEFORM_HD inline void deposit(const ReceiverView& rv, float px, float py, Fixed w, Add&& add) {
     const Splat s = splat(rv, px, py, w);
-    for (int k = 0, n = rv.bilinear ? 4 : 1; k < n; ++k) add(s.cell[k], s.amount[k]);
+    for (int k = 0, n = rv.deposit == Deposit::nearest ? 1 : 4; k < n; ++k) add(s.cell[k], s.amount[k]);
 }
 
 // The nearest hit of a segment on a triangle of the surface (or of an extra mesh).

@@ -17,7 +17,7 @@ inline ReceiverView make_receiver_view(const Receiver& r, const Frame& surface_f
     v.inv_cell_v = float(r.height / r.size.y);
     v.width = r.width;
     v.height = r.height;
-    v.bilinear = r.deposit == Deposit::bilinear;
+    v.deposit = r.deposit;
     return v;
 }
 

@@ -1,0 +1,161 @@
+// Receiver deposits (core/deposit.hpp) and the cell-mean measure (design/cell_means.hpp):
+// what each deposit can see, checked against independent computations.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <freeform/design/cell_means.hpp>
+
+#include "support.hpp"
+
+using namespace freeform;
+using namespace freeform::testing;
+
+namespace {
+
+ReceiverView receiver_view(int w, int h, Deposit d) {
+    ReceiverView v;
+    v.width = w;
+    v.height = h;
+    v.deposit = d;
+    return v;
+}
+
+std::vector<Fixed> deposit_points(const ReceiverView& rv, const std::vector<std::pair<float, float>>& points, Fixed w) {
+    std::vector<Fixed> cells(std::size_t(rv.width) * rv.height, 0);
+    for (const auto& [x, y] : points)
+        deposit(rv, x, y, w, [&](std::int64_t c, Fixed a) { cells[std::size_t(c)] += a; });
+    return cells;
+}
+
+// Points on a fine regular grid with twice the density in even receiver columns: an
+// irradiance that alternates from cell to cell along x (and is uniform along y).
+std::vector<std::pair<float, float>> alternating_columns(int w, int h, int per_cell) {
+    std::vector<std::pair<float, float>> pts;
+    for (int x = 0; x < w; ++x) {
+        const int n = x % 2 == 0 ? 2 * per_cell : per_cell;
+        for (int y = 0; y < h; ++y)
+            for (int i = 0; i < n; ++i)
+                for (int j = 0; j < per_cell; ++j)
+                    pts.emplace_back(float(x + (i + 0.5) / n), float(y + (j + 0.5) / per_cell));
+    }
+    return pts;
+}
+
+double l1_to_uniform_interior(const std::vector<Fixed>& cells, int w, int h) {
+    // Cells away from the receiver's edges, against their own mean.
+    double sum = 0, mean = 0;
+    int n = 0;
+    for (int y = 2; y < h - 2; ++y)
+        for (int x = 2; x < w - 2; ++x) mean += double(cells[std::size_t(y) * w + x]), ++n;
+    mean /= n;
+    for (int y = 2; y < h - 2; ++y)
+        for (int x = 2; x < w - 2; ++x) sum += std::abs(double(cells[std::size_t(y) * w + x]) - mean);
+    return sum / (2.0 * mean * n);
+}
+
+}  // namespace
+
+TEST_CASE("every deposit keeps a ray's weight exactly, at the edges too") {
+    const Fixed w = to_fixed(1.2345);
+    for (const Deposit d : {Deposit::nearest, Deposit::bilinear, Deposit::fine_bilinear}) {
+        const ReceiverView rv = receiver_view(7, 5, d);
+        for (float x : {0.0f, 0.1f, 0.24f, 0.26f, 0.5f, 0.74f, 0.76f, 3.0f, 3.999f, 6.9f, 6.999f})
+            for (float y : {0.0f, 0.2f, 2.5f, 2.8f, 4.99f}) {
+                Fixed sum = 0;
+                deposit(rv, x, y, w, [&](std::int64_t c, Fixed a) {
+                    CHECK(c >= 0);
+                    CHECK(c < 35);
+                    sum += a;
+                });
+                CHECK(sum == w);
+            }
+    }
+}
+
+TEST_CASE("fine_bilinear is bilinear on a grid twice as fine, summed into cells") {
+    // The independent computation: a receiver of twice the resolution with the plain
+    // bilinear deposit, each 2 x 2 block of its cells added up.
+    const int w = 6, h = 4;
+    const ReceiverView coarse = receiver_view(w, h, Deposit::fine_bilinear);
+    const ReceiverView fine = receiver_view(2 * w, 2 * h, Deposit::bilinear);
+    const Fixed weight = to_fixed(1.0);
+    CounterRng rng(7, 0);
+    for (int k = 0; k < 2000; ++k) {
+        const float x = float(rng.uniform() * w), y = float(rng.uniform() * h);
+        const std::vector<Fixed> a = deposit_points(coarse, {{x, y}}, weight);
+        const std::vector<Fixed> fine_cells = deposit_points(fine, {{2 * x, 2 * y}}, weight);
+        for (int cy = 0; cy < h; ++cy)
+            for (int cx = 0; cx < w; ++cx) {
+                Fixed b = 0;
+                for (int dy = 0; dy < 2; ++dy)
+                    for (int dx = 0; dx < 2; ++dx) b += fine_cells[std::size_t(2 * cy + dy) * 2 * w + 2 * cx + dx];
+                // Both round shares to fixed point; they agree to a few units of 2^-32.
+                CHECK(std::abs(a[std::size_t(cy) * w + cx] - b) <= 4);
+            }
+    }
+}
+
+TEST_CASE("light that alternates from cell to cell: how much of its contrast each deposit keeps") {
+    // Light spread evenly inside each cell, twice as much in even columns. A ray's share
+    // of its neighbour, averaged over its cell, is what the deposit blurs: bilinear gives
+    // 1/8 to each neighbour (a cell keeps 3/4), so it keeps half the alternation
+    // (3/4 − 2 · 1/8); fine_bilinear gives 1/16 (keeps 7/8), three quarters; nearest all.
+    // (At finer scales bilinear's tent loses more: its response is sinc²(f) against the
+    // cell mean's sinc(f), fine_bilinear's sinc(f) · sinc(f/2).)
+    const int w = 24, h = 6;
+    const auto pts = alternating_columns(w, h, 8);
+    const Fixed weight = to_fixed(1.0);
+    const auto error = [&](Deposit d) {
+        return l1_to_uniform_interior(deposit_points(receiver_view(w, h, d), pts, weight), w, h);
+    };
+    // Cell means: columns of 2 and 1 parts, mean 1.5: |0.5| / (2 · 1.5) = 1/6.
+    const double nearest = error(Deposit::nearest);
+    CHECK(nearest == doctest::Approx(1.0 / 6.0).epsilon(1e-6));
+    CHECK(error(Deposit::bilinear) == doctest::Approx(0.5 / 6.0).epsilon(1e-4));
+    CHECK(error(Deposit::fine_bilinear) == doctest::Approx(0.75 / 6.0).epsilon(1e-4));
+}
+
+TEST_CASE("cell means: the error converges as rays double, and is the nearest-deposit error") {
+    // A flat mirror under collimated light throws a uniform square on the receiver; the
+    // target is that square, so the cell-mean error is only what finite rays leave.
+    Scene s = basic_scene(40, 16);
+    const Heightmap hm = surface_for(s, 21);
+    ImageD target = ImageD::Zero(40, 40);
+    target.block(10, 10, 20, 20).setConstant(1.0);
+    CellMeanOptions o;
+    o.rays_per_cell = 16;
+    o.tolerance = 0.002;
+    int calls = 0;
+    const CellMeans c = converged_cell_means(s, hm, &target, o, [&](const Scene& sc, const RaySet& rays, Histogram& h, TraceTotals& t) {
+        CHECK(sc.receiver.deposit == Deposit::nearest);
+        CHECK(rays.size() == ray_budget(sc.light, sc.receiver));
+        ++calls;
+        const Traced tr = trace_scene(sc, hm, rays);
+        h = tr.histogram;
+        t = tr.totals;
+    });
+    CHECK(c.converged);
+    CHECK(c.change_on_doubling < 0.002);
+    CHECK(c.batches == calls);
+    CHECK((c.batches & (c.batches - 1)) == 0);  // judged at 1, 2, 4, ... batches
+    CHECK(c.rays_per_cell == doctest::Approx(16.0 * c.batches));
+    CHECK(c.totals.energy() == doctest::Approx(1.0));
+    CHECK(c.error < 0.02);
+    // The same rays in one histogram give the same error (batches add exactly).
+    Histogram all(40, 40);
+    Fixed total = 0;
+    Scene near = s;
+    near.receiver.deposit = Deposit::nearest;
+    near.light.rays_per_cell = 16;
+    for (int b = 0; b < c.batches; ++b) {
+        const RaySet rays = generate_rays(near.light, hm, near.receiver, hash_combine(o.seed, std::uint64_t(b) + 1));
+        const Traced tr = trace_scene(near, hm, rays);
+        for (std::size_t k = 0; k < all.cells.size(); ++k) all.cells[k] += tr.histogram.cells[k];
+        total += rays.total;
+    }
+    CHECK(all == c.histogram);
+    CHECK(l1_error(all, make_target(target, 40, 40, total)) == doctest::Approx(c.error));
+}
