@@ -58,7 +58,7 @@ int main(int argc, char** argv) {
     try {
         const long iterations = argc > 1 ? std::atol(argv[1]) : 30000;
         const std::filesystem::path out = argc > 2 ? argv[2] : "custom_term_out";
-        // The DESIGN.md §2 scene at 100 x 100 pixels, with a "T" to throw.
+        // The docs/architecture.md §2 scene at 100 x 100 pixels, with a "T" to throw.
         Scene scene;
         scene.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
         scene.receiver.width = scene.receiver.height = 100;

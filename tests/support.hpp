@@ -10,7 +10,7 @@
 
 namespace freeform::testing {
 
-// The reference scene of DESIGN.md §2: a 0.1 m mirror at the origin facing +z, light
+// The reference scene of docs/architecture.md §2: a 0.1 m mirror at the origin facing +z, light
 // straight down, a 0.2 m receiver at z = 0.5 facing the mirror.
 inline Scene basic_scene(int receiver_px = 100, double rays_per_cell = 16) {
     Scene s;

@@ -1,4 +1,4 @@
-// Execution policies (DESIGN.md §5): for_each runs a kernel written once as a FREEFORM_HD
+// Execution policies (docs/architecture.md §5): for_each runs a kernel written once as a FREEFORM_HD
 // functor serially or with OpenMP (and, in CUDA builds, on the GPU: tests/cuda/), and the
 // results do not depend on the policy.
 #include <doctest/doctest.h>

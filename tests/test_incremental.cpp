@@ -94,8 +94,8 @@ std::vector<Case> cases() {
     {
         Scene s = basic_scene(40, 8);
         s.light.shape = PointLight{{0.01, -0.02, 0.3}, {}, {}};
-        s.receiver.deposit = Deposit::bilinear;
-        out.push_back({"point light mirror", s, 25});
+        s.receiver.deposit = Deposit::fine_bilinear;  // the default deposit
+        out.push_back({"point light mirror, fine_bilinear", s, 25});
     }
     {
         Scene s = basic_scene(40, 8);

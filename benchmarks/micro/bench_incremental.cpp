@@ -29,7 +29,7 @@ using namespace freeform;
 
 namespace {
 
-// The DESIGN.md §2 scene with the letter-E target, a mildly curved start (so that light
+// The docs/architecture.md §2 scene with the letter-E target, a mildly curved start (so that light
 // is spread over the receiver as during a design) and 16 rays per receiver cell.
 struct Bench {
     Scene scene;

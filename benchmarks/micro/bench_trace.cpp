@@ -3,7 +3,7 @@
 // of retracing rays against a proposed move (the incremental evaluation's kernel), and
 // the cost of an Embree refit after a height change.
 //
-// Scene: DESIGN.md §2 — a 0.1 m mirror at the origin facing +z, a 0.2 m receiver of
+// Scene: docs/architecture.md §2 — a 0.1 m mirror at the origin facing +z, a 0.2 m receiver of
 // 200 x 200 pixels at z = 0.5 facing it, 16 rays per receiver cell (640,000 rays), height
 // bounds ±5 mm. The mirror is mildly curved: a fixed field of smooth random bumps within
 // ±2 mm, so that reflected rays spread and some cross several cells.

@@ -1,5 +1,5 @@
 // The transport start's cost: the grid OT solve (back-and-forth method) and the surface
-// fit, on the DESIGN.md §2 scene (0.1 m mirror, 200² receiver 0.5 m away, collimated
+// fit, on the docs/architecture.md §2 scene (0.1 m mirror, 200² receiver 0.5 m away, collimated
 // light), for two targets made in code so that the benchmark needs no files:
 //   letter  a block letter E (three bars and a spine; large empty regions, sharp edges)
 //   smooth  a smooth positive image (a sum of broad Gaussians on a grey floor)

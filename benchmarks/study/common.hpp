@@ -36,6 +36,7 @@
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/setup.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
+#include <freeform/design/exported.hpp>
 #include <freeform/trace/embree.hpp>
 #endif
 
@@ -85,16 +86,10 @@ inline Scene load_patched_scene(const fs::path& file, const std::vector<json>& p
 }
 
 // The final mesh the designer would end with for this scene (the scene's, or "auto").
-inline std::pair<int, int> final_mesh_of(const Scene& scene, const ImageD& target) {
+inline std::pair<int, int> final_mesh_of(const Scene& scene) {
     if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    const auto levels = plan_levels(scene, &target);
+    const auto levels = plan_levels(scene);
     return {levels.back().mesh_x, levels.back().mesh_y};
-}
-
-inline double l1_error(const Histogram& h, const Target& t) {
-    std::int64_t s = 0;
-    for (std::size_t k = 0; k < h.cells.size(); ++k) s += std::llabs(h.cells[k] - t.cells[k]);
-    return double(s) / (2.0 * double(t.total));
 }
 
 inline ImageD target_image(const Target& t) {

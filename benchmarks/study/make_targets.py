@@ -8,6 +8,9 @@ check the "auto" mesh rule on targets the earlier passes never saw (issue 11, pa
   gradient.png  a smooth grey landscape (a ramp, two bright blobs, a dark hollow and a
                 soft ripple): "photographic" by the designer's test, more than 25 % of its
                 pixels grey; camera setup
+  street.png    a synthetic photograph (a street at dusk: sky, sun, skyline with lit
+                windows, road in perspective, grain) for the lens setup (issue 22's check
+                on photographs that are not examples)
 
 Plain Python (no numpy), deterministic: the committed PNGs are what this writes.
 
@@ -56,7 +59,56 @@ def gradient(x: float, y: float) -> float:
     return max(0.0, (ramp + blob1 + blob2 - hollow + ripple) * vignette)
 
 
-TARGETS = {"ring": ring, "checker": checker, "gradient": gradient}
+def _hash_noise(i: int, j: int) -> float:
+    """Deterministic value noise in [0, 1) on an integer lattice."""
+    h = (i * 374761393 + j * 668265263) & 0xFFFFFFFF
+    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
+    return ((h ^ (h >> 16)) & 0xFFFF) / 65536.0
+
+
+def _texture(x: float, y: float, cells: int) -> float:
+    """Smoothly interpolated value noise with `cells` lattice cells across the image."""
+    u, v = x * cells, y * cells
+    i, j = int(u), int(v)
+    fu, fv = smoothstep(u - i), smoothstep(v - j)
+    a, b = _hash_noise(i, j), _hash_noise(i + 1, j)
+    c, d = _hash_noise(i, j + 1), _hash_noise(i + 1, j + 1)
+    return (a * (1 - fu) + b * fu) * (1 - fv) + (c * (1 - fu) + d * fu) * fv
+
+
+def street(x: float, y: float) -> float:
+    """A synthetic photograph: a street at dusk. Sky gradient with a low sun, a skyline of
+    blocks with lit windows, a road in perspective with lane marks, and grain: hard edges,
+    smooth ramps and texture at several scales, as a real photograph has (issue 22)."""
+    sky = 0.35 + 0.45 * y / 0.55 + 0.5 * math.exp(-((x - 0.7) ** 2 + (y - 0.42) ** 2) / (2 * 0.05 ** 2))
+    # Skyline: block tops from a fixed list of (left, right, top) in image units.
+    blocks = [(0.0, 0.14, 0.22), (0.12, 0.27, 0.30), (0.27, 0.36, 0.15), (0.36, 0.52, 0.34),
+              (0.52, 0.61, 0.26), (0.61, 0.80, 0.38), (0.80, 0.92, 0.20), (0.92, 1.0, 0.31)]
+    horizon = 0.58
+    v = sky
+    for left, right, top in blocks:
+        if left <= x < right and top <= y < horizon:
+            wall = 0.18 + 0.08 * _texture(x, y, 40)
+            # Windows: a grid, some lit.
+            gx, gy = (x - left) / 0.025, (y - top) / 0.035
+            inside = 0.25 < gx % 1.0 < 0.75 and 0.3 < gy % 1.0 < 0.8
+            lit = _hash_noise(int(gx) + int(left * 1000), int(gy)) > 0.55
+            v = wall + (0.55 if inside and lit else 0.0)
+            break
+    if y >= horizon:
+        depth = (y - horizon) / (1.0 - horizon)  # 0 at the horizon, 1 at the bottom
+        road_half = 0.05 + 0.45 * depth
+        if abs(x - 0.5) < road_half:
+            v = 0.22 + 0.10 * depth + 0.06 * _texture(x, y, 60)
+            lane = abs(x - 0.5) < 0.004 + 0.012 * depth and int(depth * 14) % 2 == 0
+            if lane:
+                v = 0.85
+        else:
+            v = 0.10 + 0.15 * _texture(x, y, 25)  # verges
+    return max(0.0, v + 0.05 * (_texture(x, y, 90) - 0.5))
+
+
+TARGETS = {"ring": ring, "checker": checker, "gradient": gradient, "street": street}
 
 
 def render(f) -> list:
@@ -94,7 +146,7 @@ def write_grey_png(path: str, rows: list) -> None:
 
 
 def grey_fraction(rows: list) -> float:
-    """The designer's photograph test (target_grey_fraction): pixels in (0.1, 0.9) of the peak."""
+    """The share of grey pixels, in (0.1, 0.9) of the peak (the designer's photograph test until issue 22)."""
     vals = [v for row in rows for v in row]
     return sum(0.1 < v < 0.9 for v in vals) / len(vals)
 

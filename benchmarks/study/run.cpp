@@ -111,7 +111,7 @@ int run(const Args& a) {
     const int threads = thread_count(exec::omp_t{a.threads});
     const std::uint64_t eval_seed = a.eval_seed ? *a.eval_seed : judge.optimise.seed;
 
-    auto [nx, ny] = final_mesh_of(run_scene, run_target);
+    auto [nx, ny] = final_mesh_of(run_scene);
     nx = (nx - 1) * a.mesh_scale + 1;
     ny = (ny - 1) * a.mesh_scale + 1;
     run_scene.surface.nx = nx;
@@ -122,7 +122,7 @@ int run(const Args& a) {
         else
             run_scene.light.rays_per_cell *= a.rays_scale;
     }
-    const auto [case_nx, case_ny] = final_mesh_of(judge, target);
+    const auto [case_nx, case_ny] = final_mesh_of(judge);
 
     json out;
     out["label"] = a.label.empty() ? a.engine : a.label;
@@ -180,7 +180,7 @@ int run(const Args& a) {
         if (a.kernel_supports > 0) {
             Scene planned = run_scene;
             planned.optimise = o;
-            o.levels = plan_levels(planned, &run_target);
+            o.levels = plan_levels(planned);
             for (auto& l : o.levels) l.kernel_supports = {a.kernel_supports};
         }
         DesignResult r = design(run_scene, io::make_initial_heightmap(run_scene, nx, ny), run_target, o,
@@ -302,13 +302,20 @@ int run(const Args& a) {
         Scene fab_scene = judge;
         fab_scene.surface.phong_alpha = alpha;
         const Fabrication fab = make_fabrication(fab_scene, result_surface);
-        const TriangleMesh front = tessellate_surface(result_surface, float(alpha), fab.subdivisions, false);
-        const Evaluation e = evaluate_with(judge, result_surface, 0.0, target, eval_seed, a.threads, 1.0,
-                                           [&](const Heightmap&, const RaySet& r, const PathParams& p) {
-                                               return EmbreeTracer(front, r, p);
-                                           });
-        out["final"]["error_exported"] = e.error;
+        const ExportedGeometry geometry = exported_geometry(fab_scene, result_surface, fab.subdivisions);
+        const RaySet rays = generate_rays(judge.light, result_surface, judge.receiver, eval_seed);
+        const ExportedTrace e = trace_exported(exec::omp_t{a.threads}, judge, geometry, rays);
+        out["final"]["error_exported"] =
+            l1_error(e.histogram, make_target(target, judge.receiver.width, judge.receiver.height, rays.total));
         out["final"]["export_subdivisions"] = fab.subdivisions;
+        // The figure that counts (docs/measures.md): cell means of the exported mesh.
+        CellMeanOptions cm;
+        cm.seed = hash_combine(eval_seed, 0x63656c6c6d65616eULL);
+        const CellMeans cells = exported_cell_means(exec::omp_t{a.threads}, fab_scene, result_surface, geometry,
+                                                    &target, cm);
+        out["final"]["error_physical"] = cells.error;
+        out["final"]["energy_physical"] = cells.totals.energy();
+        out["final"]["physical_rays_per_cell"] = cells.rays_per_cell;
     }
 #endif
     if (a.check_render) {

@@ -151,9 +151,9 @@ constexpr bool mpi_built =
 #endif
 
 // The final mesh of a scene whose mesh is "auto": what the designer's plan ends with.
-std::pair<int, int> final_mesh(const Scene& scene, const ImageD* target) {
+std::pair<int, int> final_mesh(const Scene& scene) {
     if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    const auto levels = plan_levels(scene, target);
+    const auto levels = plan_levels(scene);
     return {levels.back().mesh_x, levels.back().mesh_y};
 }
 
@@ -305,7 +305,7 @@ int run_render(const RenderArgs& a) {
     if (!a.heightmap.empty()) {
         surface = heightmap_from_pfm(scene, a.heightmap);
     } else {
-        const auto [nx, ny] = final_mesh(scene, target ? &*target : nullptr);
+        const auto [nx, ny] = final_mesh(scene);
         surface = io::make_initial_heightmap(scene, nx, ny);
         // The scene's start, as a design would begin: the transport surface by default
         // (not needed when a mesh replaces the surface: the grid only places the rays).
@@ -369,6 +369,9 @@ int run_render(const RenderArgs& a) {
         return RenderOutcome{};  // choose_tracer never picks Embree in a build without it
 #endif
     };
+    // A surface (the scene's or a heightmap) is traced with the rays a design on its grid
+    // fits (optimise.min_rays_per_mesh_cell), so a design's heightmap renders to its error.
+    if (!mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, surface.nx(), surface.ny());
     RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
     const RenderOutcome r = trace(scene, rays);
     // With a target: the cell means of what was rendered (error_physical, docs/measures.md).
@@ -437,6 +440,49 @@ int run_render(const RenderArgs& a) {
 }
 
 // ---------------------------------------------------------------------------- design
+
+struct ExportEvaluation {
+    std::optional<double> error_exported;  // the exported mesh on the design's rays and deposit
+    std::optional<CellMeans> cells;        // its cell means (error_physical); none without Embree
+};
+
+// Traces a design's exported part (design/exported.hpp): with the design's rays (a
+// diagnostic) and as converged cell means (error_physical, docs/measures.md). Fills
+// metrics' error_exported, energy_exported, error_physical, energy_physical, cell_means
+// and export.
+ExportEvaluation evaluate_export(const Scene& scene, const Heightmap& surface, const Fabrication& fabrication,
+                                 const RaySet& rays, const Histogram& hist, const Target& t, const ImageD& target,
+                                 const DesignOptions& options, json& m) {
+    json exported;
+    exported["subdivisions"] = fabrication.subdivisions;
+    exported["subdivisions_chosen"] =
+        fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
+    exported["facet_normal_error_mrad"] = fabrication.normal_error * 1e3;
+    exported["facet_normal_tolerance_mrad"] = fabrication.normal_tolerance * 1e3;
+    exported["triangles"] = fabrication.mesh.triangles.size();
+    ExportEvaluation ev;
+#if defined(FREEFORM_WITH_EMBREE)
+    const ExportedGeometry geometry = exported_geometry(scene, surface, fabrication.subdivisions);
+    const ExportedTrace et = trace_exported(exec::omp_t{options.threads}, scene, geometry, rays);
+    ev.error_exported = l1_error(et.histogram, t);
+    m["error_exported"] = *ev.error_exported;
+    m["energy_exported"] = et.totals.energy();
+    exported["l1_to_design_irradiance"] = l1_error(et.histogram.cells, hist.cells, rays.total);
+    ev.cells = exported_cell_means(exec::omp_t{options.threads}, scene, surface, geometry, &target,
+                                   cell_mean_options(options.seed));
+    m["error_physical"] = ev.cells->error;
+    m["energy_physical"] = ev.cells->totals.energy();
+    m["cell_means"] = cell_means_json(*ev.cells, "the exported surface.obj traced as flat triangles");
+#else
+    (void)scene, (void)surface, (void)rays, (void)hist, (void)t, (void)target, (void)options;
+    m["error_exported"] = nullptr;
+    m["error_physical"] = nullptr;
+    exported["not_traced"] = "built without Embree";
+#endif
+    m["export"] = exported;
+    return ev;
+}
+
 
 struct DesignArgs {
     fs::path scene, out;
@@ -515,7 +561,10 @@ int run_design(const DesignArgs& a) {
         throw InputError(a.scene.string() +
                          ": meshes: designing with extra meshes is not supported yet (render them with --tracer embree)");
     const ImageD target = io::load_target_image(scene);
-    const auto [nx, ny] = final_mesh(scene, &target);
+    const auto [nx, ny] = final_mesh(scene);
+    // Enough rays for the final mesh (optimise.min_rays_per_mesh_cell): the design, its
+    // checks and the final render all use them (effective_scene records the figure).
+    scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
     Heightmap initial = io::make_initial_heightmap(scene, nx, ny);
     const DesignOptions& options = scene.optimise;
     // A transport start the scene asks for by name must be possible: say so before any work.
@@ -527,9 +576,9 @@ int run_design(const DesignArgs& a) {
     const bool quiet = a.quiet || world_rank != 0;
     StatusLine status(!quiet);
     if (!quiet)
-        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %.0f s budget, seed %llu\n", a.scene.string().c_str(),
-                    nx, ny, scene.receiver.width, scene.receiver.height, options.time_budget,
-                    (unsigned long long)options.seed);
+        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu\n",
+                    a.scene.string().c_str(), nx, ny, scene.receiver.width, scene.receiver.height,
+                    scene.light.rays_per_cell, options.time_budget, (unsigned long long)options.seed);
     DesignOptions run_options = options;
     run_options.progress_every = 500;
     DesignResult result;
@@ -721,42 +770,15 @@ int run_design(const DesignArgs& a) {
     if (!quiet) status.show("exporting the surface and tracing the exported mesh");
     const Fabrication fabrication = make_fabrication(scene, result.surface);
     const TriangleMesh& fab = fabrication.mesh;
-    json exported;
-    exported["subdivisions"] = fabrication.subdivisions;
-    exported["subdivisions_chosen"] = fabrication.automatic ? "auto (export_tolerance)" : "export_subdivisions";
-    exported["facet_normal_error_mrad"] = fabrication.normal_error * 1e3;
-    exported["facet_normal_tolerance_mrad"] = fabrication.normal_tolerance * 1e3;
-    exported["triangles"] = fab.triangles.size();
-    std::optional<double> error_exported;
+    const ExportEvaluation ev = evaluate_export(scene, result.surface, fabrication, fitted.rays, fitted.hist,
+                                                fitted.scaled, target, options, m);
+    const std::optional<double>& error_exported = ev.error_exported;
+    const std::optional<CellMeans>& cells = ev.cells;
+    status.finish();
     // The images show cell means of the exported part where it can be traced (Embree),
     // else the design's own irradiance.
-    ImageD irradiance = hist.to_image();
-    ImageD target_img = target_image_of(t);
-    std::optional<CellMeans> cells;
-#if defined(FREEFORM_WITH_EMBREE)
-    {
-        const ExportedTrace et =
-            trace_exported(exec::omp_t{options.threads}, scene, result.surface, fabrication.subdivisions, rays);
-        error_exported = l1_error(et.histogram, t);
-        m["error_exported"] = *error_exported;
-        m["energy_exported"] = et.totals.energy();
-        exported["l1_to_design_irradiance"] = l1_error(et.histogram.cells, hist.cells, rays.total);
-        if (!quiet) status.show("cell means of the exported mesh (error_physical)");
-        cells = exported_cell_means(exec::omp_t{options.threads}, scene, result.surface, fabrication.subdivisions,
-                                    &target, cell_mean_options(options.seed));
-        m["error_physical"] = cells->error;
-        m["energy_physical"] = cells->totals.energy();
-        m["cell_means"] = cell_means_json(*cells, "the exported surface.obj traced as flat triangles");
-        irradiance = cells->histogram.to_image();
-        target_img = target_image_of(cells->target);
-    }
-#else
-    m["error_exported"] = nullptr;
-    m["error_physical"] = nullptr;
-    exported["not_traced"] = "built without Embree";
-#endif
-    status.finish();
-    m["export"] = exported;
+    const ImageD irradiance = cells ? cells->histogram.to_image() : hist.to_image();
+    const ImageD target_img = cells ? target_image_of(cells->target) : target_image_of(t);
     ImageF heights(result.surface.ny(), result.surface.nx());
     for (int j = 0; j < result.surface.ny(); ++j)
         for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);

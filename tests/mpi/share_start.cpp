@@ -93,7 +93,7 @@ int main(int argc, char** argv) {
         DesignOptions o = s.optimise;
         o.seed = 5;
         o.start_level = 0;  // the first level (15²) runs: the start is fitted again on it
-        const std::vector<LevelPlan> levels = plan_levels(s, &target);
+        const std::vector<LevelPlan> levels = plan_levels(s);
         const SurfaceSpec& sp = s.surface;
         const auto make = [&] {
             return prepare_start(s, Heightmap(31, 31, sp.size, sp.h_min, sp.h_max, sp.frame, sp.aperture), target, o,

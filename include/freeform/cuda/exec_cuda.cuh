@@ -1,5 +1,5 @@
 #pragma once
-// The CUDA execution policy (DESIGN.md §5): `for_each(exec::cuda, n, f)` runs f(i) for
+// The CUDA execution policy (docs/architecture.md §5): `for_each(exec::cuda, n, f)` runs f(i) for
 // every i in [0, n) on the GPU, like `for_each(exec::seq, ...)` and
 // `for_each(exec::omp, ...)` do on the CPU (core/exec.hpp). f is any functor whose call
 // operator is device-callable: a struct with a FREEFORM_HD operator(), or an extended

@@ -1,5 +1,5 @@
 #pragma once
-// The height-field tracer on the GPU (DESIGN.md §5). The surface, the aperture mask and
+// The height-field tracer on the GPU (docs/architecture.md §5). The surface, the aperture mask and
 // the rays live in device memory; every ray is traced by trace_heightfield_ray, the same
 // FREEFORM_HD kernel HeightfieldTracer runs on the CPU, through for_each(exec::cuda, ...),
 // and deposited with the same `deposit` into a fixed-point histogram with 64-bit atomics.

@@ -10,7 +10,6 @@
 // so memory stays that of one batch whatever the count.
 #include <cmath>
 #include <cstdint>
-#include <span>
 
 #include "../core/histogram.hpp"
 #include "../core/rng.hpp"
@@ -20,15 +19,6 @@
 #include "../trace/tracer.hpp"
 
 namespace freeform {
-
-// The error of the reference's eq. 3.3 between two sets of cells of the same total:
-// Σ|a − b| / (2·total). 0: identical; 1: disjoint.
-inline double l1_error(std::span<const Fixed> a, std::span<const Fixed> b, Fixed total) {
-    std::int64_t s = 0;
-    for (std::size_t k = 0; k < a.size(); ++k) s += std::llabs(a[k] - b[k]);
-    return total > 0 ? double(s) / (2.0 * double(total)) : 0.0;
-}
-inline double l1_error(const Histogram& h, const Target& t) { return l1_error(h.cells, t.cells, t.total); }
 
 struct CellMeanOptions {
     double rays_per_cell = 64;         // rays per receiver cell in each batch

@@ -96,14 +96,6 @@ struct DesignResult {
     std::uint64_t held_out_seed = 0;  // the seed of those rays (generate_rays)
 };
 
-// How "photographic" a target is: the fraction of pixels with intermediate grey levels.
-inline double target_grey_fraction(const ImageD& img) {
-    const double mx = img.maxCoeff();
-    if (!(mx > 0)) return 0;
-    const auto mid = ((img > 0.1 * mx) && (img < 0.9 * mx)).cast<double>();
-    return mid.sum() / double(img.size());
-}
-
 // Kernel supports of level k (reference §4.4, multi-level Gaussian kernels). The first
 // level runs the whole sequence for its mesh, large to small. A finer level starts where
 // the previous one stopped, at the same physical size (twice the support on a mesh with
@@ -134,25 +126,28 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
 }
 
 // The default schedule for a scene: no more model than the case needs.
-//   final mesh: the scene's, or (mesh "auto") from the receiver resolution and the
-//   target: binary shapes get about one cell per receiver pixel along the longer side,
-//   2m − 1 vertices with m = r/2 + 1 made odd (201 for a 200² letter, 53 for the 50²
-//   headlight, where the reference used 13²), photographs 2r + 1 (the reference's 401²
-//   for a 200² photo); the shorter side follows the surface's aspect ratio. Measured at
-//   equal time (benchmarks/results/mesh_rule, issue 11): the binary rule's former m
-//   (101² for 200²) ended above 2m − 1 on every seed of ten binary targets; on a
-//   photograph 4r + 1 was level with 2r + 1 (its exported mesh worse) at four times the
-//   memory. The earlier study found 13² twice the error of 25² on the headlight.
+//   final mesh: the scene's, or (mesh "auto") from the receiver resolution: about one
+//   cell per receiver pixel along the longer side, 2m − 1 vertices with m = r/2 + 1 made
+//   odd (201 for a 200² receiver, 53 for the 50² headlight, where the reference used
+//   13²); the shorter side follows the surface's aspect ratio. Photographs used to get
+//   2r + 1 (the reference's 401² for a 200² photo); judged by cell means of the exported
+//   mesh (issue 22, benchmarks/results/physical, seed 1 at 15 / 30 / 60 s) 201² beat
+//   401² on the camera photograph (0.0404 / 0.0378 / 0.0357 against 0.0454 / 0.0425 /
+//   0.0404) and on the study's grey landscape (0.0269 / 0.0265 / 0.0261 against
+//   0.0262 / 0.0306 / 0.0296, which got worse with time): the finer mesh steered single
+//   rays, and its exported facets fit fewer subdivisions in the triangle budget. Measured
+//   at equal time before that (benchmarks/results/mesh_rule, issue 11): the binary rule's
+//   former m (101² for 200²) ended above 2m − 1 on every seed of ten binary targets. The
+//   earlier study found 13² twice the error of 25² on the headlight.
 //   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (a 200²
-//   letter: 51², 101², 201² on 50, 100, 200 px; the reference had 25² → 101²); one level
+//   receiver: 51², 101², 201² on 50, 100, 200 px; the reference had 25² → 101²); one level
 //   when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
-inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* target) {
+inline std::vector<LevelPlan> plan_levels(const Scene& scene) {
     const int rx = scene.receiver.width, ry = scene.receiver.height, r = std::max(rx, ry);
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
-        const bool photo = target && target_grey_fraction(resample_area(*target, rx, ry)) > 0.25;
-        int mesh = photo ? 2 * r + 1 : 2 * ((r / 2 + 1) | 1) - 1;
+        int mesh = 2 * ((r / 2 + 1) | 1) - 1;
         mesh = std::max(5, mesh | 1);
         const Vec2d size = scene.surface.size;
         mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
@@ -174,6 +169,27 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const ImageD* targ
     assign_time_shares(levels);
     for (auto& l : levels) l.iterations = std::int64_t(40) * l.mesh_x * l.mesh_y;
     return levels;
+}
+
+// The rays per receiver cell a design fits its final level to: the light's own, raised
+// so that every cell of the final mesh (nx × ny vertices) has at least
+// optimise.min_rays_per_mesh_cell rays on average (32 by default). A mesh with few rays
+// per cell can steer single rays from cell to cell, and a design then fits the sampling
+// noise of its rays rather than the light: judged by cell means (error_physical,
+// docs/measures.md) the headlight (53² mesh on 50² px, 14 rays per mesh cell at 16 per
+// receiver cell) ended at a fitted error of 0.005 against 0.015 and did not improve with
+// time. A move's cost grows with the rays per mesh cell, so the floor is a trade: seed 1
+// at three budgets (benchmarks/results/physical), 32 beat both no floor and 64 on the
+// headlight (0.0129 / 0.0121 / 0.0116), the camera photograph (0.0412 / 0.0379 / 0.0349;
+// 64: 0.0442 / 0.0405 / 0.0365, too few moves) and the grey landscape. Unchanged when the
+// light gives a fixed `rays` count, and for meshes that are coarse for their receiver
+// (101² on 200² px has 64 already).
+inline double fitting_rays_per_cell(const Scene& scene, int nx, int ny) {
+    const Light& light = scene.light;
+    if (light.rays > 0 || !(scene.optimise.min_rays_per_mesh_cell > 0)) return light.rays_per_cell;
+    const double mesh_cells = double(std::max(nx - 1, 1)) * double(std::max(ny - 1, 1));
+    return std::max(light.rays_per_cell,
+                    std::ceil(scene.optimise.min_rays_per_mesh_cell * mesh_cells / double(scene.receiver.cells())));
 }
 
 // How many of the planned coarse levels a design starting at error `start_error` (the
@@ -344,7 +360,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 
     Scene planned = scene;
     planned.optimise = options;
-    std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned, &target_image) : options.levels;
+    std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned) : options.levels;
     const int threads = thread_count(exec::omp_t{options.threads});
     DesignResult result;
 

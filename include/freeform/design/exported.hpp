@@ -70,10 +70,10 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surf
 }
 
 // The cell means of the exported part (cell_means.hpp): what `error_physical` reports.
+// `surface` places the rays (its aperture), `geometry` is what they meet.
 template <HostPolicy P>
-CellMeans exported_cell_means(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
+CellMeans exported_cell_means(P policy, const Scene& scene, const Heightmap& surface, const ExportedGeometry& geometry,
                               const ImageD* target, const CellMeanOptions& options) {
-    const ExportedGeometry geometry = exported_geometry(scene, surface, subdivisions);
     return converged_cell_means(scene, surface, target, options,
                                 [&](const Scene& s, const RaySet& rays, Histogram& h, TraceTotals& t) {
                                     ExportedTrace et = trace_exported(policy, s, geometry, rays);

@@ -45,7 +45,7 @@ struct Fabrication {
 };
 
 // Upper bound of the "auto" level. The level is also held to the scene's
-// optimise.export_max_triangles (4 million by default: a 200 MB binary STL), so the
+// optimise.export_max_triangles (2 million by default: a 100 MB binary STL), so the
 // surface's own mesh decides how fine the facets can be: k² ≤ max / (2 · cells).
 //
 // Why so fine: error_physical (cell means, docs/measures.md) sees every displacement of

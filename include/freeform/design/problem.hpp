@@ -6,7 +6,7 @@
 // an overlay; delta() retraces only the rays the move can affect (trace/incremental.hpp)
 // and returns the exact change of the objective; accept() commits heights, records and
 // sums; reject() only informs the bandit. delta() changes nothing visible, so several
-// proposals can be evaluated concurrently (speculative parallelism, DESIGN.md §4).
+// proposals can be evaluated concurrently (speculative parallelism, docs/architecture.md §4).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

@@ -44,9 +44,7 @@ inline SurfaceEvaluation evaluate_surface(const Scene& scene, const Heightmap& s
     TraceTotals totals;
     tracer.trace_all(exec::omp_t{threads}, hist, totals);
     const Target t = make_target(target_image, scene.receiver.width, scene.receiver.height, rays.total);
-    std::int64_t l1 = 0;
-    for (std::size_t k = 0; k < hist.cells.size(); ++k) l1 += std::llabs(hist.cells[k] - t.cells[k]);
-    return {double(l1) / (2.0 * double(t.total)), totals.energy()};
+    return {l1_error(hist, t), totals.energy()};
 }
 
 inline std::string requested_start(const Scene& scene) {

@@ -4,12 +4,13 @@
 // A target image holds relative irradiance (any scale; grey levels of a PNG, a PFM,
 // rendered text). For a level with receiver resolution W × H and N emitted weight, the
 // image is area-averaged to W × H (a box filter: coarse levels see the mean of the
-// pixels they cover) and scaled so that its cells sum to exactly N (DESIGN.md §1), with
+// pixels they cover) and scaled so that its cells sum to exactly N (docs/architecture.md §1), with
 // the rounding remainder given to the cells with the largest fractional parts.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <numeric>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,15 @@ struct Target {
     std::vector<Fixed> cells;  // sums to `total`
     Fixed total = 0;
 };
+
+// The error of the reference's eq. 3.3 between two sets of cells of the same total:
+// Σ|a − b| / (2·total). 0: identical; 1: disjoint.
+inline double l1_error(std::span<const Fixed> a, std::span<const Fixed> b, Fixed total) {
+    std::int64_t s = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) s += std::llabs(a[k] - b[k]);
+    return total > 0 ? double(s) / (2.0 * double(total)) : 0.0;
+}
+inline double l1_error(const Histogram& h, const Target& t) { return l1_error(h.cells, t.cells, t.total); }
 
 // Area-weighted resampling of an image to w × h (exact box filter for any ratio).
 inline ImageD resample_area(const ImageD& img, int w, int h) {

@@ -706,6 +706,11 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"coarse_rays_per_cell",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.coarse_rays_per_cell = number_in(v, p, 0, 1 << 20); },
          [](const OptimiseSpec& o, json& j) { j["coarse_rays_per_cell"] = o.coarse_rays_per_cell; }},
+        {"min_rays_per_mesh_cell",
+         [](const json& v, const std::string& p, OptimiseSpec& o) {
+             o.min_rays_per_mesh_cell = number_in(v, p, 0, 1 << 16);
+         },
+         [](const OptimiseSpec& o, json& j) { j["min_rays_per_mesh_cell"] = o.min_rays_per_mesh_cell; }},
         {"initial_temperature_scale",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
              o.initial_temperature_scale = number_in(v, p, 1e-6, 1e6);

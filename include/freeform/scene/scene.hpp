@@ -82,6 +82,8 @@ struct OptimiseSpec {
     bool multilevel = true;           // false: only the final level
     int start_level = -1;             // first planned level to run; -1: decided from the start's error
     double coarse_rays_per_cell = 4;  // rays per receiver cell on levels before the last; 0: the light's
+    double min_rays_per_mesh_cell = 32;  // the last level: at least this many rays per cell of the
+                                         // final mesh (design/designer.hpp, fitting_rays_per_cell); 0: off
     bool held_out_checks = true;      // judge stages with held-out rays (design/held_out.hpp)
 
     // Objective.
@@ -120,7 +122,7 @@ struct OptimiseSpec {
     int export_subdivisions = 0;      // tessellation level k of the exported mesh; 0 = "auto"
     double export_tolerance = 0.05;   // "auto": light of a facet lands within this many receiver
                                       // cells of where the simulated patch sends it
-    std::int64_t export_max_triangles = 4'000'000;  // "auto": k no larger than this allows
+    std::int64_t export_max_triangles = 2'000'000;  // "auto": k no larger than this allows
     std::int64_t progress_every = 2000;
 };
 

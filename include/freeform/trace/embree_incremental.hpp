@@ -1,5 +1,5 @@
 #pragma once
-// Incremental evaluation with the Embree tracer (DESIGN.md §4 for both tracers).
+// Incremental evaluation with the Embree tracer (docs/architecture.md §4 for both tracers).
 //
 // Embree must see a move before it can trace it: the backend writes the move's heights
 // into the height map, refits only the Embree tiles the patch touches, retraces the

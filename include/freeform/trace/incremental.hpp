@@ -1,5 +1,5 @@
 #pragma once
-// Incremental evaluation (DESIGN.md §4): a move changes a few heights, so only the rays
+// Incremental evaluation (docs/architecture.md §4): a move changes a few heights, so only the rays
 // whose paths cross the changed part of the surface can land elsewhere.
 //
 // For every surface cell we keep the rays whose path crosses that cell inside the height

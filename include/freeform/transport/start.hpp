@@ -1,5 +1,5 @@
 #pragma once
-// The transport start (DESIGN.md §4b): a surface that already puts the light roughly
+// The transport start (docs/architecture.md §4b): a surface that already puts the light roughly
 // where the target wants it, for the annealer to refine under the exact model.
 //
 //  1. Source density μ: the scene's own rays (generate_rays: uniform for collimated
