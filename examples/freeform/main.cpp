@@ -282,6 +282,19 @@ struct RenderArgs {
     bool mesh_normals = false;
 };
 
+// A render's files: irradiance.pfm is the render with the scene's deposit and rays; the
+// PNGs show cell means where a target asked for them (docs/measures.md).
+void write_render_outputs(const fs::path& out, const json& m, const Histogram& render,
+                          const std::optional<CellMeans>& cells) {
+    const ImageD irradiance = render.to_image();
+    const ImageD shown = cells ? cells->histogram.to_image() : irradiance;
+    fs::create_directories(out);
+    io::write_pfm(out / "irradiance.pfm", irradiance.cast<float>());
+    io::write_png(out / "irradiance.png", io::tone_map(shown));
+    if (cells) io::write_png(out / "comparison.png", comparison_image(shown, target_image_of(cells->target)));
+    write_json(out / "metrics.json", m);
+}
+
 int run_render(const RenderArgs& a) {
     // Under mpirun every rank would render the same: rank 0 does it alone.
     if (world_rank != 0) return 0;
@@ -405,10 +418,8 @@ int run_render(const RenderArgs& a) {
     if (mesh)
         m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
                                            : json("the scene's surface material");
-    std::optional<Target> t;
     if (target) {
-        t = make_target(*target, scene.receiver.width, scene.receiver.height, rays.total);
-        m["error"] = l1_error(r.histogram, *t);
+        m["error"] = l1_error(r.histogram, make_target(*target, scene.receiver.width, scene.receiver.height, rays.total));
         m["error_physical"] = cells->error;
         m["energy_physical"] = cells->totals.energy();
         m["cell_means"] = cell_means_json(*cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
@@ -416,22 +427,14 @@ int run_render(const RenderArgs& a) {
     if (start) m["start"] = start_report_json(*start);
     m["effective_scene"] = scene_to_json(scene);
 
-    // irradiance.pfm is the render with the scene's deposit and rays; the PNGs show cell
-    // means where a target asked for them.
-    const ImageD irradiance = r.histogram.to_image();
-    const ImageD shown = cells ? cells->histogram.to_image() : irradiance;
-    fs::create_directories(a.out);
-    io::write_pfm(a.out / "irradiance.pfm", irradiance.cast<float>());
-    io::write_png(a.out / "irradiance.png", io::tone_map(shown));
-    if (cells) io::write_png(a.out / "comparison.png", comparison_image(shown, target_image_of(cells->target)));
-    write_json(a.out / "metrics.json", m);
+    write_render_outputs(a.out, m, r.histogram, cells);
     std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(decision.tracer),
                 decision.reason.c_str());
     if (cells)
         std::printf("  error_physical %.4f, energy %.4f: cell means, nearest deposit, %.0f rays per cell\n",
                     cells->error, cells->totals.energy(), cells->rays_per_cell);
     std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
-                r.totals.energy(), t ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
+                r.totals.energy(), target ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
                 m["rays_per_second"].get<double>() / 1e6);
     if (start)
         std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", start->used.c_str(), start->flat_error);
