@@ -14,11 +14,13 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <charconv>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <limits>
@@ -26,6 +28,7 @@
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -34,8 +37,10 @@
 #include <freeform/design/designer.hpp>
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/report_json.hpp>
+#include <freeform/design/resources.hpp>
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>
+#include <freeform/io/staged_output.hpp>
 #include <freeform/io/target.hpp>
 #include <freeform/objective/target.hpp>
 #include <freeform/scene/json.hpp>
@@ -137,6 +142,67 @@ TracerChoice parse_tracer(const std::string& s) {
     throw InputError("--tracer: must be one of auto, heightfield, embree; got '" + s + "'");
 }
 
+// A byte count with an optional unit (K/M/G/T with or without "iB"/"B": powers of 1024),
+// or a plain count; npos when the text is neither.
+std::optional<double> parse_amount(std::string text, bool bytes) {
+    double scale = 1;
+    if (bytes) {
+        for (const char* suffix : {"iB", "B"})
+            if (text.size() > std::strlen(suffix) && text.ends_with(suffix)) {
+                text.resize(text.size() - std::strlen(suffix));
+                break;
+            }
+        if (!text.empty()) {
+            const std::string units = "KMGT";
+            if (const auto u = units.find(char(std::toupper(static_cast<unsigned char>(text.back()))));
+                u != std::string::npos) {
+                scale = std::pow(1024.0, double(u + 1));
+                text.pop_back();
+            }
+        }
+    }
+    double value = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+    if (text.empty() || ec != std::errc{} || end != text.data() + text.size() || !std::isfinite(value) ||
+        !(value >= 1) || value * scale > 9.0e18)
+        return std::nullopt;
+    return value * scale;
+}
+
+// --limit NAME=VALUE (repeatable): raises or lowers one of the Limits (docs/limits.md).
+Limits parse_limits(const std::vector<std::string>& settings) {
+    Limits limits;
+    for (const std::string& setting : settings) {
+        const std::size_t eq = setting.find('=');
+        const std::string name = setting.substr(0, eq);
+        const auto bad = [&](const std::string& why) {
+            return InputError("--limit " + setting + ": " + why +
+                              " (names: json_depth, scene_file_bytes, data_file_bytes, pixels, triangles, "
+                              "memory_bytes; sizes take K/M/G/T suffixes, e.g. memory_bytes=32GiB)");
+        };
+        if (eq == std::string::npos) throw bad("expected NAME=VALUE");
+        const bool bytes = name.ends_with("_bytes");
+        const std::optional<double> value = parse_amount(setting.substr(eq + 1), bytes);
+        if (!value) throw bad("the value must be a whole number >= 1");
+        const auto whole = std::uint64_t(*value);
+        if (name == "json_depth")
+            limits.json_depth = int(std::min<std::uint64_t>(whole, 1u << 20));
+        else if (name == "scene_file_bytes")
+            limits.scene_file_bytes = whole;
+        else if (name == "data_file_bytes")
+            limits.data_file_bytes = whole;
+        else if (name == "pixels")
+            limits.pixels = whole;
+        else if (name == "triangles")
+            limits.triangles = whole;
+        else if (name == "memory_bytes")
+            limits.memory_bytes = whole;
+        else
+            throw bad("unknown limit '" + name + "'");
+    }
+    return limits;
+}
+
 constexpr bool embree_built =
 #if defined(FREEFORM_WITH_EMBREE)
     true;
@@ -158,13 +224,13 @@ std::pair<int, int> final_mesh(const Scene& scene) {
 }
 
 // A heightmap from a PFM file, on the grid the file has.
-Heightmap heightmap_from_pfm(Scene scene, const fs::path& file) {
-    const ImageF img = io::read_pfm(file);
+Heightmap heightmap_from_pfm(Scene scene, const fs::path& file, const Limits& limits) {
+    const ImageF img = io::read_pfm(file, limits);
     if (img.cols() < 2 || img.rows() < 2)
         throw InputError("--heightmap: " + file.string() + " must be at least 2 x 2 pixels");
     scene.surface.initial_pfm = file;
     scene.surface.initial_paraboloid.reset();
-    return io::make_initial_heightmap(scene, int(img.cols()), int(img.rows()));
+    return io::make_initial_heightmap(scene, int(img.cols()), int(img.rows()), limits);
 }
 
 struct RenderOutcome {
@@ -255,8 +321,9 @@ io::RgbImage comparison_image(const ImageD& result, const ImageD& target) {
 void write_json(const fs::path& file, const json& j) { io::write_file_atomically(file, j.dump(2) + "\n"); }
 
 // Refuses an output directory that cannot be created or written before any work is done,
-// so that a long design never fails at its end (nothing is created here).
-void check_output_dir(const fs::path& out) {
+// so that a long design never fails at its end (nothing is created here), and one where
+// an output file's name is taken by a folder.
+void check_output_dir(const fs::path& out, std::initializer_list<const char*> names) {
     std::error_code ec;
     if (fs::exists(out, ec) && !fs::is_directory(out, ec))
         throw InputError("--out: " + out.string() + " exists and is not a directory");
@@ -269,7 +336,16 @@ void check_output_dir(const fs::path& out) {
         throw InputError("--out: cannot create " + out.string() + " (" + p.string() + " is not a directory)");
     if (::access(p.c_str(), W_OK) != 0)
         throw InputError("--out: cannot create " + out.string() + " (" + p.string() + " is not writable)");
+    for (const char* name : names)
+        if (fs::is_directory(out / name, ec))
+            throw InputError("--out: " + (out / name).string() + " is a folder, where an output file would go");
 }
+
+constexpr std::initializer_list<const char*> render_outputs = {"irradiance.pfm", "irradiance.png", "comparison.png",
+                                                              "metrics.json"};
+constexpr std::initializer_list<const char*> design_outputs = {
+    "metrics.json",   "convergence.csv", "heightmap.pfm", "irradiance.pfm", "irradiance.png",
+    "target.png",     "comparison.png",  "surface.obj",   "surface.stl"};
 
 // ---------------------------------------------------------------------------- render
 
@@ -280,6 +356,7 @@ struct RenderArgs {
     int threads = 0;
     std::optional<std::int64_t> seed;
     bool mesh_normals = false;
+    std::vector<std::string> limits;  // --limit NAME=VALUE
 };
 
 // A render's files: irradiance.pfm is the render with the scene's deposit and rays; the
@@ -288,19 +365,25 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
                           const std::optional<CellMeans>& cells) {
     const ImageD irradiance = render.to_image();
     const ImageD shown = cells ? cells->histogram.to_image() : irradiance;
-    fs::create_directories(out);
-    io::write_pfm(out / "irradiance.pfm", irradiance.cast<float>());
-    io::write_png(out / "irradiance.png", io::tone_map(shown));
-    if (cells) io::write_png(out / "comparison.png", comparison_image(shown, target_image_of(cells->target)));
-    write_json(out / "metrics.json", m);
+    io::StagedOutput staged(out);
+    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
+    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(shown)); });
+    if (cells)
+        staged.write("comparison.png", [&](const fs::path& f) {
+            io::write_png(f, comparison_image(shown, target_image_of(cells->target)));
+        });
+    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
+    staged.commit("metrics.json");
 }
 
 int run_render(const RenderArgs& a) {
     // Under mpirun every rank would render the same: rank 0 does it alone.
     if (world_rank != 0) return 0;
-    Scene scene = io::load_scene(a.scene);
+    const Limits limits = parse_limits(a.limits);
+    Scene scene = io::load_scene(a.scene, limits);
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
-    check_output_dir(a.out);
+    check_output_dir(a.out, render_outputs);
+    check_resources(scene, RunKind::render, thread_count(exec::omp_t{a.threads}), limits);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
     std::optional<MeshMaterial> mesh_material;
@@ -312,14 +395,14 @@ int run_render(const RenderArgs& a) {
     const TracerDecision decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
 
     std::optional<ImageD> target;
-    if (scene.target) target = io::load_target_image(scene);
+    if (scene.target) target = io::load_target_image(scene, limits);
     Heightmap surface;
     std::optional<StartReport> start;
     if (!a.heightmap.empty()) {
-        surface = heightmap_from_pfm(scene, a.heightmap);
+        surface = heightmap_from_pfm(scene, a.heightmap, limits);
     } else {
         const auto [nx, ny] = final_mesh(scene);
-        surface = io::make_initial_heightmap(scene, nx, ny);
+        surface = io::make_initial_heightmap(scene, nx, ny, limits);
         // The scene's start, as a design would begin: the transport surface by default
         // (not needed when a mesh replaces the surface: the grid only places the rays).
         if (target && a.mesh.empty() && starts_from_transport(scene) && scene.meshes.empty()) {
@@ -331,7 +414,7 @@ int run_render(const RenderArgs& a) {
         }
     }
     std::optional<TriangleMesh> mesh;
-    if (!a.mesh.empty()) mesh = io::read_mesh(a.mesh);
+    if (!a.mesh.empty()) mesh = io::read_mesh(a.mesh, limits);
     // A solid is one surface: corners repeated per face (OBJ with face normals, STL) are
     // merged before its edges are matched.
     if (mesh && mesh_material) {
@@ -340,7 +423,7 @@ int run_render(const RenderArgs& a) {
     }
     std::vector<TriangleMesh> extra;
     for (const auto& m : scene.meshes) {
-        extra.push_back(io::read_mesh(m.file));
+        extra.push_back(io::read_mesh(m.file, limits));
         if (m.material.is_refractive()) {
             extra.back() = io::welded(extra.back());
             check_refractive_solid(extra.back(), m.file.string());
@@ -498,6 +581,7 @@ struct DesignArgs {
     double ladder_ratio = 1.5;        // freeform_mpi only
     std::int64_t exchange_every = 0;  // freeform_mpi only; 0 = automatic
     double merge_coverage = 30;       // freeform_mpi only
+    std::vector<std::string> limits;  // --limit NAME=VALUE
 };
 
 #if defined(FREEFORM_WITH_MPI)
@@ -551,9 +635,10 @@ RankLayout rank_layout(int threads) {
 #endif
 
 int run_design(const DesignArgs& a) {
-    Scene scene = io::load_scene(a.scene);
+    const Limits limits = parse_limits(a.limits);
+    Scene scene = io::load_scene(a.scene, limits);
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
-    check_output_dir(a.out);
+    check_output_dir(a.out, design_outputs);
     if (a.time_budget) {
         if (!(*a.time_budget > 0)) throw InputError("--time-budget: must be > 0 seconds");
         scene.optimise.time_budget = *a.time_budget;
@@ -563,12 +648,13 @@ int run_design(const DesignArgs& a) {
     if (!scene.meshes.empty())
         throw InputError(a.scene.string() +
                          ": meshes: designing with extra meshes is not supported yet (render them with --tracer embree)");
-    const ImageD target = io::load_target_image(scene);
+    check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits);
+    const ImageD target = io::load_target_image(scene, limits);
     const auto [nx, ny] = final_mesh(scene);
     // Enough rays for the final mesh (optimise.min_rays_per_mesh_cell): the design, its
     // checks and the final render all use them (effective_scene records the figure).
     scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
-    Heightmap initial = io::make_initial_heightmap(scene, nx, ny);
+    Heightmap initial = io::make_initial_heightmap(scene, nx, ny, limits);
     const DesignOptions& options = scene.optimise;
     // A transport start the scene asks for by name must be possible: say so before any work.
     if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == "transport")
@@ -786,16 +872,23 @@ int run_design(const DesignArgs& a) {
     for (int j = 0; j < result.surface.ny(); ++j)
         for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);
 
-    fs::create_directories(a.out);
-    write_json(a.out / "metrics.json", m);
-    io::write_file_atomically(a.out / "convergence.csv", csv.str());
-    io::write_pfm(a.out / "heightmap.pfm", heights);
-    io::write_pfm(a.out / "irradiance.pfm", irradiance.cast<float>());
-    io::write_png(a.out / "irradiance.png", io::tone_map(irradiance));
-    io::write_png(a.out / "target.png", io::tone_map(target_img));
-    io::write_png(a.out / "comparison.png", comparison_image(irradiance, target_img));
-    io::write_obj(a.out / "surface.obj", fab);
-    io::write_stl(a.out / "surface.stl", fab);
+    // Every file is staged and moved into place together, metrics.json last
+    // (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside a
+    // partial result.
+    if (!quiet) status.show("writing the results");
+    io::StagedOutput staged(a.out);
+    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, csv.str()); });
+    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_pfm(f, heights); });
+    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
+    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
+    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
+    staged.write("comparison.png",
+                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
+    staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
+    staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
+    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
+    staged.commit("metrics.json");
+    status.finish();
     if (!a.quiet || true) {
         std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
                     (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
@@ -827,14 +920,27 @@ int run_design(const DesignArgs& a) {
 }
 
 
-int cli_main(int argc, char** argv) {
+// The parsed command line: which command, and its arguments.
+struct CommandLine {
+    RenderArgs render;
+    DesignArgs design;
+    bool is_render = false;
+};
+
+// Parses argv into `cl`. Returns the exit code when parsing ends the program (help,
+// version, a usage error: one line on stderr, exit 2), nothing when the command runs.
+std::optional<int> parse_command_line(int argc, const char* const* argv, CommandLine& cl) {
+    RenderArgs& ra = cl.render;
+    DesignArgs& da = cl.design;
     CLI::App app{"freeform: design freeform reflectors and lenses that throw a target image onto a plane.\n"
                  "Scene files are described in docs/scene.md.",
                  "freeform"};
     app.set_version_flag("--version", version);
     app.require_subcommand(1);
 
-    RenderArgs ra;
+    constexpr const char* limit_help =
+        "NAME=VALUE: raise or lower a resource limit (repeatable): json_depth (64), scene_file_bytes (16MiB), "
+        "data_file_bytes (4GiB), pixels (67108864), triangles (67108864), memory_bytes (16GiB); docs/limits.md";
     CLI::App* render = app.add_subcommand("render", "trace a scene's surface (or a heightmap / mesh) and write its irradiance");
     render->add_option("scene", ra.scene, "scene file (JSON)")->required();
     render->add_option("--out", ra.out, "output directory (irradiance.pfm/.png, metrics.json)")->required();
@@ -853,8 +959,8 @@ int cli_main(int argc, char** argv) {
     render->add_option("--threads", ra.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
     render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)")
         ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
+    render->add_option("--limit", ra.limits, limit_help)->allow_extra_args(false);
 
-    DesignArgs da;
     CLI::App* design_cmd = app.add_subcommand("design", "optimise the surface so that its light matches the target");
     design_cmd->add_option("scene", da.scene, "scene file (JSON) with a target")->required();
     design_cmd->add_option("--out", da.out,
@@ -870,6 +976,7 @@ int cli_main(int argc, char** argv) {
                                : "worker threads (0 = all cores)")
         ->check(CLI::Range(0, 65536));
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
+    design_cmd->add_option("--limit", da.limits, limit_help)->allow_extra_args(false);
     design_cmd->add_flag("--start-only", da.start_only,
                          "write the start surface alone (the transport surface by default), without annealing");
 #if defined(FREEFORM_WITH_MPI)
@@ -906,9 +1013,32 @@ int cli_main(int argc, char** argv) {
         if (world_rank == 0) std::fprintf(stderr, "freeform: %s (see freeform --help)\n", e.what());
         return 2;
     }
+    cl.is_render = render->parsed();
+    return std::nullopt;
+}
+
+// The values of options that are checked without reading any file; the run functions
+// call the same parsers, so this only makes them fail before any work (and gives the
+// command-line fuzzer, tests/fuzz, the whole argument layer).
+void check_arguments(const CommandLine& cl) {
+    if (cl.is_render) {
+        parse_limits(cl.render.limits);
+        if (!cl.render.material.empty()) parse_mesh_material(cl.render.material);
+        if (!cl.render.tracer.empty()) parse_tracer(cl.render.tracer);
+    } else {
+        parse_limits(cl.design.limits);
+        if (cl.design.time_budget && !(*cl.design.time_budget > 0))
+            throw InputError("--time-budget: must be > 0 seconds");
+    }
+}
+
+int cli_main(int argc, char** argv) {
+    CommandLine cl;
+    if (const std::optional<int> exit_code = parse_command_line(argc, argv, cl)) return *exit_code;
     try {
-        if (*render) return run_render(ra);
-        return run_design(da);
+        check_arguments(cl);
+        if (cl.is_render) return run_render(cl.render);
+        return run_design(cl.design);
     } catch (const InputError& e) {
         // Every rank reads the same input and finds the same error: one message.
         if (world_rank == 0) std::fprintf(stderr, "freeform: %s\n", e.what());
@@ -924,6 +1054,7 @@ int cli_main(int argc, char** argv) {
 
 }  // namespace
 
+#if !defined(FREEFORM_CLI_NO_MAIN)  // tests/fuzz/fuzz_cli.cpp includes this file for its parser
 int main(int argc, char** argv) {
 #if defined(FREEFORM_WITH_MPI)
     // OpenMP threads evaluate moves; only the main thread calls MPI.
@@ -945,3 +1076,4 @@ int main(int argc, char** argv) {
     return cli_main(argc, argv);
 #endif
 }
+#endif

@@ -3,6 +3,7 @@
 // Writers go through write_file_atomically so that a failed or interrupted write
 // never leaves a truncated file where a user (or the next run) would pick it up.
 #include <bit>
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -13,6 +14,7 @@
 #include <system_error>
 
 #include "../core/error.hpp"
+#include "../core/limits.hpp"
 
 namespace freeform::io {
 
@@ -39,21 +41,38 @@ inline void store_float_le(char* p, float value) {
 }  // namespace detail
 
 // The bytes of a file. Throws IoError naming the file when it is missing, is not a
-// regular file, or cannot be read completely.
-inline std::string read_file_bytes(const std::filesystem::path& file) {
+// regular file, or cannot be read completely, and InputError naming the limit when the
+// file is larger than `max_bytes` (`limit_name` is the Limits field that sets it): the
+// size is checked before anything is read, and again while reading (a file may grow).
+inline std::string read_file_bytes(const std::filesystem::path& file,
+                                   std::uint64_t max_bytes = Limits{}.data_file_bytes,
+                                   const char* limit_name = "data_file_bytes") {
     std::error_code ec;
     const auto status = std::filesystem::status(file, ec);
     if (ec || !std::filesystem::exists(status))
         throw IoError("cannot read '" + file.string() + "': file does not exist");
     if (!std::filesystem::is_regular_file(status))
         throw IoError("cannot read '" + file.string() + "': not a regular file");
+    const auto too_large = [&](std::uint64_t size, const char* qualifier) {
+        over_limit("cannot read '" + file.string() + "': the file is " + qualifier + format_bytes(double(size)),
+                   limit_name, format_bytes(double(max_bytes)));
+    };
+    const std::uintmax_t size = std::filesystem::file_size(file, ec);
+    if (!ec && size > max_bytes) too_large(size, "");
 
     std::FILE* f = std::fopen(file.string().c_str(), "rb");
     if (!f) throw IoError("cannot open '" + file.string() + "' for reading");
     std::string bytes;
+    if (!ec) bytes.reserve(std::size_t(size));
     char buffer[1 << 16];
     std::size_t n = 0;
-    while ((n = std::fread(buffer, 1, sizeof buffer, f)) > 0) bytes.append(buffer, n);
+    while ((n = std::fread(buffer, 1, sizeof buffer, f)) > 0) {
+        if (bytes.size() + n > max_bytes) {
+            std::fclose(f);
+            too_large(bytes.size() + n, "over ");
+        }
+        bytes.append(buffer, n);
+    }
     const bool failed = std::ferror(f) != 0;
     std::fclose(f);
     if (failed) throw IoError("error while reading '" + file.string() + "'");
@@ -92,9 +111,15 @@ inline void write_file_atomically(const std::filesystem::path& file, std::string
         throw IoError("cannot write '" + file.string() + "': cannot create a temporary file in '" +
                       (parent.empty() ? std::string(".") : parent.string()) + "'");
 
-    bool ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-    ok = (std::fflush(f) == 0) && ok;
-    ok = (std::fclose(f) == 0) && ok;  // buffered data may only fail to reach disk here
+    int error = 0;  // the first errno of a failed write, flush or close (disk full, file too large)
+    const auto note = [&](bool ok) {
+        if (!ok && error == 0) error = errno != 0 ? errno : EIO;
+        return ok;
+    };
+    errno = 0;
+    bool ok = note(std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size());
+    ok = note(std::fflush(f) == 0) && ok;
+    ok = note(std::fclose(f) == 0) && ok;  // buffered data may only fail to reach disk here
     if (ok) {
         fs::rename(temp, file, ec);
         ok = !ec;
@@ -102,7 +127,8 @@ inline void write_file_atomically(const std::filesystem::path& file, std::string
     if (!ok) {
         std::error_code ignored;
         fs::remove(temp, ignored);
-        throw IoError("cannot write '" + file.string() + "'" + (ec ? ": " + ec.message() : std::string()));
+        const std::string reason = ec ? ec.message() : std::generic_category().message(error);
+        throw IoError("cannot write '" + file.string() + "': " + reason);
     }
 }
 

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
@@ -120,6 +121,39 @@ inline std::filesystem::path find_font(const std::string& name) {
                   (file_names.size() > 1 ? " (or .otf/.ttc)" : "") + " in " + looked);
 }
 
+namespace detail {
+
+inline std::uint64_t font_u16(std::string_view b, std::uint64_t at) {
+    return (std::uint64_t(static_cast<unsigned char>(b[at])) << 8) | static_cast<unsigned char>(b[at + 1]);
+}
+inline std::uint64_t font_u32(std::string_view b, std::uint64_t at) {
+    return (font_u16(b, at) << 16) | font_u16(b, at + 2);
+}
+
+// stb_truetype trusts the offsets in a font file. Before it sees one, the table
+// directory of the first font (of a collection, too) must lie inside the file and every
+// table it lists must end inside the file; a truncated or foreign file fails here.
+// (The glyph outlines themselves are not checked: font files are taken to come from a
+// font package or the user, not from an untrusted source; docs/limits.md.)
+inline bool font_directory_fits(std::string_view b) {
+    if (b.size() < 12) return false;
+    std::uint64_t font = 0;
+    if (b.substr(0, 4) == "ttcf") {
+        if (b.size() < 16) return false;
+        font = font_u32(b, 12);
+    }
+    if (font + 12 > b.size()) return false;
+    const std::uint64_t tables = font_u16(b, font + 4);
+    if (font + 12 + 16 * tables > b.size()) return false;
+    for (std::uint64_t t = 0; t < tables; ++t) {
+        const std::uint64_t record = font + 12 + 16 * t;
+        if (font_u32(b, record + 8) + font_u32(b, record + 12) > b.size()) return false;
+    }
+    return true;
+}
+
+}  // namespace detail
+
 // Renders UTF-8 `text` ('\n' separates lines, each centred) as white antialiased
 // coverage in [0, 1] on black, in a height × width image. The ink bounding box (from
 // the glyph outlines) is scaled as large as fits inside the image minus `margin` (a
@@ -138,7 +172,7 @@ inline ImageF render_text(const std::string& text, const std::filesystem::path& 
     const std::string font_bytes = read_file_bytes(font_file);
     const auto* font_data = reinterpret_cast<const unsigned char*>(font_bytes.data());
     stbtt_fontinfo font{};
-    const int offset = font_bytes.size() >= 12 ? stbtt_GetFontOffsetForIndex(font_data, 0) : -1;
+    const int offset = detail::font_directory_fits(font_bytes) ? stbtt_GetFontOffsetForIndex(font_data, 0) : -1;
     if (offset < 0 || !stbtt_InitFont(&font, font_data, offset))
         throw IoError("cannot load font '" + font_file.string() + "': not a TrueType/OpenType font");
 

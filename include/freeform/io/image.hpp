@@ -9,6 +9,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -17,6 +18,7 @@
 
 #include "../core/error.hpp"
 #include "../core/histogram.hpp"
+#include "../core/limits.hpp"
 #include "file.hpp"
 #include "pfm.hpp"
 
@@ -73,21 +75,34 @@ struct StbiFree {
 
 }  // namespace detail
 
-// Reads an image as grey luminance. PNG, JPEG, BMP, TGA, GIF, PSD, PNM: 8-bit values are
-// divided by 255 and 16-bit ones by 65535, colour becomes Rec. 709 luma of the stored
-// (gamma-encoded) values, and alpha composites over black (transparent = no light).
-// Radiance HDR files give linear luminance, not clamped to [0, 1]. A ".pfm" extension
-// dispatches to read_pfm. Throws IoError naming the file and stb's reason on failure.
-inline ImageF read_image_grey(const std::filesystem::path& file) {
-    if (detail::lower_extension(file) == ".pfm") return read_pfm(file);
-
-    const std::string bytes = read_file_bytes(file);
+// Decodes the bytes of an image as grey luminance. PNG, JPEG, BMP, TGA, GIF, PSD, PNM:
+// 8-bit values are divided by 255 and 16-bit ones by 65535, colour becomes Rec. 709
+// luma of the stored (gamma-encoded) values, and alpha composites over black
+// (transparent = no light). Radiance HDR files give linear luminance, not clamped to
+// [0, 1]. A ".pfm" extension of `file` (which names the bytes in messages) dispatches to
+// parse_pfm. Throws IoError naming the file and stb's reason on failure, and InputError
+// when the header announces more than limits.pixels (checked before decoding).
+inline ImageF decode_image_grey(std::string_view bytes, const std::filesystem::path& file,
+                                const Limits& limits = {}) {
+    if (detail::lower_extension(file) == ".pfm") return parse_pfm(bytes, file, limits);
     if (bytes.size() > std::size_t(std::numeric_limits<int>::max()))
         throw IoError("cannot read image '" + file.string() + "': file too large");
     const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
     const int size = static_cast<int>(bytes.size());
+    const auto failure = [&] {
+        const char* reason = stbi_failure_reason();
+        // stb leaves the reason empty for some truncated files.
+        const std::string why = reason && *reason ? reason : "corrupt or truncated image data";
+        return IoError("cannot read image '" + file.string() + "': " + why);
+    };
 
     int width = 0, height = 0, channels = 0;
+    if (!stbi_info_from_memory(data, size, &width, &height, &channels)) throw failure();
+    if (width <= 0 || height <= 0) throw IoError("cannot read image '" + file.string() + "': no pixels");
+    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels)
+        over_limit("image '" + file.string() + "': " + std::to_string(width) + " x " + std::to_string(height) +
+                       " pixels",
+                   "pixels", std::to_string(limits.pixels));
     const bool hdr = stbi_is_hdr_from_memory(data, size) != 0;
     const bool sixteen = !hdr && stbi_is_16_bit_from_memory(data, size) != 0;
     std::unique_ptr<void, detail::StbiFree> pixels;
@@ -97,12 +112,9 @@ inline ImageF read_image_grey(const std::filesystem::path& file) {
         pixels.reset(stbi_load_16_from_memory(data, size, &width, &height, &channels, 0));
     else
         pixels.reset(stbi_load_from_memory(data, size, &width, &height, &channels, 0));
-    if (!pixels) {
-        const char* reason = stbi_failure_reason();
-        // stb leaves the reason empty for some truncated files.
-        const std::string why = reason && *reason ? reason : "corrupt or truncated image data";
-        throw IoError("cannot read image '" + file.string() + "': " + why);
-    }
+    if (!pixels) throw failure();
+    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels || channels < 1 || channels > 4)
+        throw IoError("cannot read image '" + file.string() + "': the decoded image differs from its header");
 
     auto sample = [&](std::size_t i) -> float {
         if (hdr) return static_cast<const float*>(pixels.get())[i];
@@ -125,6 +137,12 @@ inline ImageF read_image_grey(const std::filesystem::path& file) {
             img(y, x) = value;
         }
     return img;
+}
+
+// Reads an image file (decode_image_grey), refusing files larger than
+// limits.data_file_bytes before reading them.
+inline ImageF read_image_grey(const std::filesystem::path& file, const Limits& limits = {}) {
+    return decode_image_grey(read_file_bytes(file, limits.data_file_bytes), file, limits);
 }
 
 // Writes an 8-bit grey PNG; values are clamped to [0, 1] (NaN becomes 0).

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "../core/error.hpp"
+#include "../core/limits.hpp"
 #include "../core/math.hpp"
 #include "../surface/triangle_mesh.hpp"
 #include "file.hpp"
@@ -126,7 +127,14 @@ inline std::uint32_t load_u32_le(const char* p) {
 inline constexpr std::size_t stl_header_bytes = 84;  // 80-byte comment + triangle count
 inline constexpr std::size_t stl_triangle_bytes = 50;
 
-inline TriangleMesh read_stl_binary(const std::string& bytes, const std::filesystem::path& file) {
+inline void check_triangle_count(std::uint64_t count, const std::filesystem::path& file, const char* format,
+                                 const Limits& limits) {
+    if (count > limits.triangles)
+        over_limit(std::string(format) + " file '" + file.string() + "': " + std::to_string(count) + " triangles",
+                   "triangles", std::to_string(limits.triangles));
+}
+
+inline TriangleMesh read_stl_binary(std::string_view bytes, const std::filesystem::path& file, const Limits& limits) {
     const std::string prefix = "bad STL file '" + file.string() + "': ";
     if (bytes.size() < stl_header_bytes)
         throw IoError(prefix + "truncated: " + std::to_string(bytes.size()) +
@@ -140,6 +148,7 @@ inline TriangleMesh read_stl_binary(const std::string& bytes, const std::filesys
     if (count == 0) throw IoError(prefix + "the file contains no triangles");
     if (count > std::uint32_t(std::numeric_limits<std::int32_t>::max() / 3))
         throw IoError(prefix + "too many triangles (" + std::to_string(count) + ")");
+    check_triangle_count(count, file, "STL", limits);
 
     TriangleMesh mesh;
     VertexWelder welder;
@@ -159,7 +168,22 @@ inline TriangleMesh read_stl_binary(const std::string& bytes, const std::filesys
     return mesh;
 }
 
-inline TriangleMesh read_stl_ascii(const std::string& bytes, const std::filesystem::path& file) {
+// Lines whose first word is `keyword` (counted before a reader allocates for them).
+inline std::uint64_t count_records(std::string_view text, std::string_view keyword) {
+    std::uint64_t n = 0;
+    for_each_line(text, [&](int, std::string_view line) {
+        const std::size_t first = line.find_first_not_of(" \t\v\f");
+        if (first == std::string_view::npos) return;
+        line.remove_prefix(first);
+        if (line.substr(0, keyword.size()) != keyword) return;
+        const char next = line.size() == keyword.size() ? ' ' : line[keyword.size()];
+        if (next == ' ' || next == '\t' || next == '\v' || next == '\f' || next == '\r') ++n;
+    });
+    return n;
+}
+
+inline TriangleMesh read_stl_ascii(std::string_view bytes, const std::filesystem::path& file, const Limits& limits) {
+    check_triangle_count(count_records(bytes, "facet"), file, "ASCII STL", limits);
     TriangleMesh mesh;
     VertexWelder welder;
     std::vector<std::int32_t> facet;
@@ -198,14 +222,29 @@ inline TriangleMesh read_stl_ascii(const std::string& bytes, const std::filesyst
 
 }  // namespace detail
 
-// Reads a Wavefront OBJ: 'v', 'vn' and 'f' records (faces as "a", "a/b", "a/b/c" or
+// Parses a Wavefront OBJ: 'v', 'vn' and 'f' records (faces as "a", "a/b", "a/b/c" or
 // "a//c", negative indices relative to the end; polygons fan-triangulated); all other
 // records are ignored. Vertex normals are kept only when every vertex gets one
 // consistent (normalised) 'vn' from the faces; otherwise mesh.normals is empty.
-// Throws IoError naming the file and the line on malformed records or indices out of
-// range, and when the file holds no face.
-inline TriangleMesh read_obj(const std::filesystem::path& file) {
-    const std::string text = read_file_bytes(file);
+// Throws IoError naming the file (`file` names the text in messages) and the line on
+// malformed records or indices out of range, and when the file holds no face; InputError
+// when the records (counted before anything is built) ask for more than limits.triangles
+// triangles or 3 × limits.triangles vertex records.
+inline TriangleMesh parse_obj(std::string_view text, const std::filesystem::path& file, const Limits& limits = {}) {
+    {
+        std::uint64_t triangles = 0, vertex_records = 0;
+        detail::for_each_line(text, [&](int, std::string_view line) {
+            const auto tokens = detail::split_whitespace(line.substr(0, line.find('#')));
+            if (tokens.empty()) return;
+            if (tokens[0] == "f" && tokens.size() >= 4) triangles += tokens.size() - 3;
+            if (tokens[0] == "v" || tokens[0] == "vn") ++vertex_records;
+        });
+        detail::check_triangle_count(triangles, file, "OBJ", limits);
+        if (vertex_records > 3 * limits.triangles)
+            over_limit("OBJ file '" + file.string() + "': " + std::to_string(vertex_records) +
+                           " vertex records (v and vn), more than 3 x triangles,",
+                       "triangles", std::to_string(limits.triangles));
+    }
 
     struct Corner {
         std::int64_t vertex;
@@ -391,23 +430,32 @@ inline void write_stl(const std::filesystem::path& file, const TriangleMesh& mes
 // them). A file is binary when its size matches the triangle count in its header,
 // otherwise ASCII if it starts with "solid". Throws IoError naming the file on
 // truncation, malformed records or a file without triangles.
-inline TriangleMesh read_stl(const std::filesystem::path& file) {
-    const std::string bytes = read_file_bytes(file);
+inline TriangleMesh parse_stl(std::string_view bytes, const std::filesystem::path& file, const Limits& limits = {}) {
     const bool consistent_binary =
         bytes.size() >= detail::stl_header_bytes &&
         bytes.size() == detail::stl_header_bytes +
                             std::uint64_t(detail::load_u32_le(bytes.data() + 80)) * detail::stl_triangle_bytes;
     const std::size_t first = bytes.find_first_not_of(" \t\r\n");
-    const bool starts_with_solid = first != std::string::npos && std::string_view(bytes).substr(first, 5) == "solid";
-    if (!consistent_binary && starts_with_solid) return detail::read_stl_ascii(bytes, file);
-    return detail::read_stl_binary(bytes, file);
+    const bool starts_with_solid = first != std::string::npos && bytes.substr(first, 5) == "solid";
+    if (!consistent_binary && starts_with_solid) return detail::read_stl_ascii(bytes, file, limits);
+    return detail::read_stl_binary(bytes, file, limits);
+}
+
+// Reads an STL file (parse_stl) or an OBJ file (parse_obj), refusing files larger than
+// limits.data_file_bytes before reading them.
+inline TriangleMesh read_stl(const std::filesystem::path& file, const Limits& limits = {}) {
+    return parse_stl(read_file_bytes(file, limits.data_file_bytes), file, limits);
+}
+
+inline TriangleMesh read_obj(const std::filesystem::path& file, const Limits& limits = {}) {
+    return parse_obj(read_file_bytes(file, limits.data_file_bytes), file, limits);
 }
 
 // Reads a mesh file by its extension: .stl (binary or ASCII), anything else as OBJ.
-inline TriangleMesh read_mesh(const std::filesystem::path& file) {
+inline TriangleMesh read_mesh(const std::filesystem::path& file, const Limits& limits = {}) {
     std::string ext = file.extension().string();
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return ext == ".stl" ? read_stl(file) : read_obj(file);
+    return ext == ".stl" ? read_stl(file, limits) : read_obj(file, limits);
 }
 
 }  // namespace freeform::io

@@ -18,6 +18,7 @@
 
 #include "../core/error.hpp"
 #include "../core/histogram.hpp"
+#include "../core/limits.hpp"
 #include "file.hpp"
 
 namespace freeform::io {
@@ -63,11 +64,11 @@ inline constexpr long long pfm_max_side = 1 << 20;
 
 }  // namespace detail
 
-// Reads a grey ("Pf") or RGB ("PF", averaged to grey) PFM of either endianness.
-// Throws IoError naming the file and the problem: missing file, bad header, bad
-// dimensions, truncated or surplus data, non-finite values.
-inline ImageF read_pfm(const std::filesystem::path& file) {
-    const std::string bytes = read_file_bytes(file);
+// Parses the bytes of a grey ("Pf") or RGB ("PF", averaged to grey) PFM of either
+// endianness; `file` names it in messages. Throws IoError naming the file and the
+// problem (bad header, bad dimensions, truncated or surplus data, non-finite values) and
+// InputError when the header asks for more than limits.pixels, before any allocation.
+inline ImageF parse_pfm(std::string_view bytes, const std::filesystem::path& file, const Limits& limits = {}) {
     detail::PfmHeaderReader header(bytes, file);
 
     const std::string_view magic = header.next_token("the 'Pf'/'PF' magic");
@@ -87,6 +88,10 @@ inline ImageF read_pfm(const std::filesystem::path& file) {
     };
     const int width = parse_side("width");
     const int height = parse_side("height");
+    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels)
+        over_limit("PFM '" + file.string() + "': " + std::to_string(width) + " x " + std::to_string(height) +
+                       " pixels",
+                   "pixels", std::to_string(limits.pixels));
 
     const std::string_view scale_token = header.next_token("scale");
     double scale = 0;
@@ -124,6 +129,12 @@ inline ImageF read_pfm(const std::filesystem::path& file) {
         }
     }
     return img;
+}
+
+// Reads a PFM file (parse_pfm), refusing files larger than limits.data_file_bytes
+// before reading them. Throws IoError for a missing or unreadable file.
+inline ImageF read_pfm(const std::filesystem::path& file, const Limits& limits = {}) {
+    return parse_pfm(read_file_bytes(file, limits.data_file_bytes), file, limits);
 }
 
 // Writes a grey little-endian PFM ("Pf", scale -1) through a temporary file. Throws

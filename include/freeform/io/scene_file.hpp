@@ -6,12 +6,14 @@
 #include <filesystem>
 #include <set>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "../core/error.hpp"
+#include "../core/limits.hpp"
 #include "../scene/json.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
@@ -30,12 +32,12 @@ public:
         using E = nlohmann::json::parse_event_t;
         switch (event) {
             case E::object_start:
-            case E::array_start: levels_.push_back({event == E::object_start, child_path(), {}, {}, 0}); break;
+            case E::array_start: levels_.push_back({event == E::object_start, {}, {}, 0}); break;
             case E::key: {
                 Level& top = levels_.back();
                 top.pending_key = parsed.get<std::string>();
                 if (!top.keys.insert(top.pending_key).second)
-                    throw InputError(scene_json::key_path(top.path, top.pending_key) +
+                    throw InputError(path_to(levels_.size()) +
                                      ": duplicate key (a key may appear only once in an object)");
                 break;
             }
@@ -50,19 +52,22 @@ public:
     }
 
 private:
+    // Each level keeps only its own key or index (memory linear in the depth); the
+    // path of an element is assembled when an error needs it.
     struct Level {
         bool object;
-        std::string path;
         std::set<std::string> keys;
         std::string pending_key;
         std::size_t index;
     };
 
-    std::string child_path() const {
-        if (levels_.empty()) return "";
-        const Level& parent = levels_.back();
-        return parent.object ? scene_json::key_path(parent.path, parent.pending_key)
-                             : scene_json::index_path(parent.path, parent.index);
+    // The path of the element being read at the first `depth` levels ("a.b[2].c").
+    std::string path_to(std::size_t depth) const {
+        std::string path;
+        for (std::size_t k = 0; k < depth && k < levels_.size(); ++k)
+            path = levels_[k].object ? scene_json::key_path(path, levels_[k].pending_key)
+                                     : scene_json::index_path(path, levels_[k].index);
+        return path;
     }
     void count_element() {
         if (!levels_.empty() && !levels_.back().object) ++levels_.back().index;
@@ -72,7 +77,7 @@ private:
 };
 
 // "line L, column C" of the 1-based byte offset that nlohmann reports.
-inline std::string text_position(const std::string& text, std::size_t byte) {
+inline std::string text_position(std::string_view text, std::size_t byte) {
     const std::size_t end = std::min(byte == 0 ? 0 : byte - 1, text.size());
     std::size_t line = 1, line_start = 0;
     for (std::size_t k = 0; k < end; ++k)
@@ -90,6 +95,33 @@ inline std::string parse_error_detail(const std::string& what) {
     }
     const std::size_t bracket = what.find("] ");
     return bracket == std::string::npos ? what : what.substr(bracket + 2);
+}
+
+// Byte offset of the first '[' or '{' that opens a level deeper than `max_depth`
+// (outside strings and comments), or npos. Run before parsing so that a file of nested
+// brackets is refused in one pass over its bytes, with no allocation.
+inline std::size_t first_too_deep(std::string_view text, int max_depth) {
+    int depth = 0;
+    for (std::size_t k = 0; k < text.size(); ++k) {
+        const char c = text[k];
+        const char next = k + 1 < text.size() ? text[k + 1] : '\0';
+        if (c == '"') {
+            for (++k; k < text.size() && text[k] != '"'; ++k)
+                if (text[k] == '\\') ++k;
+        } else if (c == '/' && next == '/') {
+            k = text.find('\n', k);
+            if (k == std::string_view::npos) break;
+        } else if (c == '/' && next == '*') {
+            k = text.find("*/", k + 2);
+            if (k == std::string_view::npos) break;
+            ++k;
+        } else if (c == '[' || c == '{') {
+            if (++depth > max_depth) return k;
+        } else if ((c == ']' || c == '}') && depth > 0) {
+            --depth;
+        }
+    }
+    return std::string_view::npos;
 }
 
 inline std::filesystem::path resolve(const Scene& scene, const std::filesystem::path& p) {
@@ -117,14 +149,18 @@ inline void check_scene_files(const Scene& scene) {
         detail::require_file(detail::resolve(scene, scene.meshes[k].file), "meshes[" + std::to_string(k) + "].file");
 }
 
-// Reads, parses and validates a scene file; relative file names in it resolve against
-// the file's directory (Scene::base_dir, absolute). JSON comments (// and /* */) are
+// Parses and validates the text of a scene file; `name` names it in messages and
+// relative file names resolve against `base_dir`. JSON comments (// and /* */) are
 // allowed. Every error names the file: syntax errors with line and column, bad values
-// with the key ("scene.json: surface.size[1]: must be > 0, got -0.1"). Missing files
-// throw IoError, everything else InputError.
-inline Scene load_scene(const std::filesystem::path& file) {
-    const std::string text = read_file_bytes(file);
-    const std::string name = file.string();
+// with the key ("scene.json: surface.size[1]: must be > 0, got -0.1"), nesting deeper
+// than limits.json_depth (found before parsing). Throws InputError. Does no I/O: the
+// files the scene names are not checked (load_scene does that).
+inline Scene parse_scene(std::string_view text, const std::string& name, const std::filesystem::path& base_dir,
+                         const Limits& limits = {}) {
+    if (const std::size_t at = detail::first_too_deep(text, limits.json_depth); at != std::string_view::npos)
+        over_limit(name + ": arrays and objects nested deeper than " + std::to_string(limits.json_depth) +
+                       " levels at " + detail::text_position(text, at + 1),
+                   "json_depth", std::to_string(limits.json_depth));
     nlohmann::json j;
     try {
         j = nlohmann::json::parse(text, detail::DuplicateKeyCheck{}, /*allow_exceptions=*/true,
@@ -140,14 +176,25 @@ inline Scene load_scene(const std::filesystem::path& file) {
     } catch (const InputError& e) {
         throw InputError(name + ": " + e.what());
     }
-    Scene scene;
     try {
-        scene = scene_from_json(j, std::filesystem::absolute(file).parent_path());
+        return scene_from_json(j, base_dir);
+    } catch (const InputError& e) {
+        throw InputError(name + ": " + e.what());
+    }
+}
+
+// Reads, parses (parse_scene) and validates a scene file, refusing one larger than
+// limits.scene_file_bytes before reading it; relative file names in it resolve against
+// the file's directory (Scene::base_dir, absolute). Missing files, the scene's or those
+// it names, throw IoError, everything else InputError.
+inline Scene load_scene(const std::filesystem::path& file, const Limits& limits = {}) {
+    const std::string text = read_file_bytes(file, limits.scene_file_bytes, "scene_file_bytes");
+    const std::string name = file.string();
+    Scene scene = parse_scene(text, name, std::filesystem::absolute(file).parent_path(), limits);
+    try {
         check_scene_files(scene);
     } catch (const IoError& e) {
         throw IoError(name + ": " + e.what());
-    } catch (const InputError& e) {
-        throw InputError(name + ": " + e.what());
     }
     return scene;
 }
@@ -156,7 +203,8 @@ inline Scene load_scene(const std::filesystem::path& file) {
 // to the bounds), the paraboloid h = r²/(4f), or the PFM heightmap of surface.initial
 // (values in metres; image row 0 is the +v edge), resampled bilinearly when its size
 // differs. Heights are clamped to surface.height_bounds.
-inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny) {
+// limits.data_file_bytes and limits.pixels bound the PFM.
+inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny, const Limits& limits = {}) {
     const SurfaceSpec& s = scene.surface;
     Heightmap h(nx, ny, s.size, s.h_min, s.h_max, s.frame, s.aperture);
     if (!s.initial_pfm.empty() && s.initial_paraboloid)
@@ -178,7 +226,7 @@ inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny) {
     const std::filesystem::path path = detail::resolve(scene, s.initial_pfm);
     ImageF img;
     try {
-        img = read_pfm(path);
+        img = read_pfm(path, limits);
     } catch (const IoError& e) {
         throw IoError(std::string("surface.initial: ") + e.what());
     }

@@ -5,6 +5,7 @@
 
 #include "../core/error.hpp"
 #include "../core/histogram.hpp"
+#include "../core/limits.hpp"
 #include "../scene/scene.hpp"
 #include "font.hpp"
 #include "image.hpp"
@@ -14,7 +15,8 @@ namespace freeform::io {
 // The target of `scene` at a resolution fine enough for its receiver: an image file as
 // stored (grey levels are relative irradiance; a PFM is taken linearly), or text rendered
 // at 4x the receiver resolution so that area resampling anti-aliases its edges.
-inline ImageD load_target_image(const Scene& scene) {
+// limits.data_file_bytes and limits.pixels bound the image file.
+inline ImageD load_target_image(const Scene& scene, const Limits& limits = {}) {
     if (!scene.target) throw InputError("target: the scene has no target (add a \"target\" block)");
     const TargetSpec& t = *scene.target;
     ImageF img;
@@ -23,7 +25,7 @@ inline ImageD load_target_image(const Scene& scene) {
         img = render_text(t.text, find_font(t.font), w, h, t.margin);
     } else {
         try {
-            img = read_image_grey(t.image);
+            img = read_image_grey(t.image, limits);
         } catch (const IoError& e) {
             throw IoError(std::string("target.image: ") + e.what());
         }
