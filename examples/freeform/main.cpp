@@ -634,6 +634,25 @@ RankLayout rank_layout(int threads) {
 }
 #endif
 
+// A design's files. Every file is staged and moved into place together, metrics.json
+// last (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside
+// a partial result, and a failed write leaves the previous results as they were.
+void write_design_outputs(const fs::path& out, const json& m, const std::string& csv, const ImageF& heights,
+                          const ImageD& irradiance, const ImageD& target_img, const TriangleMesh& fab) {
+    io::StagedOutput staged(out);
+    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, csv); });
+    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_pfm(f, heights); });
+    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
+    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
+    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
+    staged.write("comparison.png",
+                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
+    staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
+    staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
+    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
+    staged.commit("metrics.json");
+}
+
 int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
     Scene scene = io::load_scene(a.scene, limits);
@@ -872,22 +891,8 @@ int run_design(const DesignArgs& a) {
     for (int j = 0; j < result.surface.ny(); ++j)
         for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);
 
-    // Every file is staged and moved into place together, metrics.json last
-    // (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside a
-    // partial result.
     if (!quiet) status.show("writing the results");
-    io::StagedOutput staged(a.out);
-    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, csv.str()); });
-    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_pfm(f, heights); });
-    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
-    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
-    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
-    staged.write("comparison.png",
-                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
-    staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
-    staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
-    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
-    staged.commit("metrics.json");
+    write_design_outputs(a.out, m, csv.str(), heights, irradiance, target_img, fab);
     status.finish();
     if (!a.quiet || true) {
         std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
@@ -998,7 +1003,8 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
         ->check(CLI::Range(1e-3, 1e6));
 #endif
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
-               "Exit codes: 0 success, 2 bad input, 1 internal error, 130 design interrupted (results written).");
+               "Exit codes: 0 success, 2 bad input, a limit exceeded (docs/limits.md) or a file that cannot be read or "
+               "written, 1 internal error, 130 design interrupted (results written).");
 
     try {
         app.parse(argc, argv);
