@@ -1,6 +1,6 @@
 // Bounded resources and whole results (issue 25): every reader refuses a request over
 // its limit before allocating for it, with a message that names the file and the
-// limit; the run planner refuses scenes whose rays would not fit; StagedOutput moves a
+// limit; stb_image is handed only files it decodes safely; the run planner refuses scenes whose rays would not fit; StagedOutput moves a
 // run's files into place together and puts the previous ones back when it cannot.
 #include <doctest/doctest.h>
 
@@ -17,6 +17,10 @@
 #include <fstream>
 #include <random>
 #include <string>
+#include <utility>
+#include <vector>
+
+#include <stb_image_write.h>
 
 #include "support.hpp"
 
@@ -327,4 +331,57 @@ TEST_CASE("StagedOutput: all new files or all previous ones") {
         io::StagedOutput s(out);
         CHECK(staging_folders() == 1);  // its own only
     }
+}
+
+TEST_CASE("image structure: stb_image sees only files of the formats it decodes safely") {
+    TempDir dir;
+    // Real files of every accepted format decode.
+    std::vector<unsigned char> grey(48 * 32);
+    for (std::size_t k = 0; k < grey.size(); ++k) grey[k] = static_cast<unsigned char>((k * 37) % 251);
+    std::vector<float> linear(grey.begin(), grey.end());
+    REQUIRE(stbi_write_jpg((dir / "a.jpg").string().c_str(), 48, 32, 1, grey.data(), 90));
+    REQUIRE(stbi_write_bmp((dir / "a.bmp").string().c_str(), 48, 32, 1, grey.data()));
+    REQUIRE(stbi_write_hdr((dir / "a.hdr").string().c_str(), 48, 32, 1, linear.data()));
+    std::string pgm = "P5\n# a comment\n48 32\n255\n";
+    pgm.append(reinterpret_cast<const char*>(grey.data()), grey.size());
+    write_raw(dir / "a.pgm", pgm);
+    for (const char* name : {"a.jpg", "a.bmp", "a.hdr", "a.pgm"}) {
+        INFO(name);
+        const ImageF img = io::read_image_grey(dir / name);
+        CHECK(img.cols() == 48);
+        CHECK(img.rows() == 32);
+    }
+    CHECK(io::read_image_grey(dir / "a.pgm")(0, 1) == doctest::Approx(37.0 / 255.0));
+
+    // The inputs that made stb write out of bounds or step into undefined behaviour under
+    // the fuzzer are refused before stb sees them, each for its reason.
+    const fs::path found = fs::path(FREEFORM_SOURCE_DIR) / "tests" / "fuzz" / "regressions" / "image";
+    const std::pair<const char*, const char*> refused[] = {
+        {"stb-jpeg-dht-counts-over-256.jpg", "a JPEG segment runs past the end"},
+        {"stb-png-empty-idat-memcpy-null.png", "a PNG chunk runs past the end"},
+        {"stb-pnm-width-int-overflow.ppm", "oversized number"},
+        {"stb-psd-matte-float-to-uchar.psd", "not a PNG, JPEG, BMP"},
+    };
+    for (const auto& [name, reason] : refused) {
+        INFO(name);
+        const std::string m = input_error([&] { (void)io::read_image_grey(found / name); });
+        CHECK(contains(m, name));
+        CHECK(contains(m, reason));
+    }
+    // A Huffman table of 257 codes made by hand (SOI, DHT with counts 15 x 16 + 17), and a
+    // PNG whose first IDAT is empty, whole.
+    std::string jpeg = "\xFF\xD8\xFF\xC4";
+    std::string table(1, '\0');
+    for (int k = 0; k < 16; ++k) table.push_back(char(k == 15 ? 17 : 16));
+    table.append(257, '\0');
+    jpeg += std::string{char((table.size() + 2) >> 8), char((table.size() + 2) & 0xff)} + table + "\xFF\xD9";
+    CHECK(contains(input_error([&] { (void)io::decode_image_grey(jpeg, "h.jpg"); }), "more than 256 codes"));
+    std::string png("\x89PNG\r\n\x1a\n", 8);
+    const char empty_idat[] = "\0\0\0\0IDAT\x35\xaf\x06\x1e";
+    png += std::string("\0\0\0\x0dIHDR\0\0\0\x05\0\0\0\x04\x10\0\0\0\0\x33\xc8\x76\xdf", 25) +
+           std::string(empty_idat, 12) + std::string("\0\0\0\0IEND\xae\x42\x60\x82", 12);
+    CHECK(contains(input_error([&] { (void)io::decode_image_grey(png, "e.png"); }), "an empty PNG IDAT chunk"));
+    // GIF, TGA (no signature) and PSD are not taken.
+    CHECK(contains(input_error([&] { (void)io::decode_image_grey("GIF89a\x01\x00\x01\x00", "g.gif"); }),
+                   "not a PNG, JPEG"));
 }
