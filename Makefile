@@ -1,8 +1,11 @@
 # Entry points for people and CI. The real build is CMake (see CMakePresets.json).
 #   make demo           install dependencies, build, run the demo (results in results/demo)
 #   make test           release build + all tests
-#   make test-clang     Release build with Debian's clang + tests (build/clang; CI runs it)
-#   make test-sanitize  AddressSanitizer/UBSan build + tests
+#   make test-clang     Release build with Debian's clang + tests (build/clang)
+#   make test-sanitize  AddressSanitizer/UBSan build with Debian's clang + tests (CI's clang build)
+#   make fuzz [FUZZ_TIME=60] [FUZZ_JOBS=1]  libFuzzer + ASan/UBSan build with clang (build/fuzz),
+#                       then each reader's fuzz target for FUZZ_TIME seconds; findings in
+#                       build/fuzz/artifacts/<reader>/, non-zero exit if any (docs/fuzzing.md)
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
 #                         (the full study reuses the runs in benchmarks/results/runs, the committed
 #                         ones included; STUDY_ARGS=--fresh measures every run again)
@@ -27,7 +30,7 @@ FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o 
 # Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.
 .NOTPARALLEL:
 
-.PHONY: all deps deps-bench deps-clang deps-validate validate configure build demo test test-clang test-sanitize bench clean format
+.PHONY: all deps deps-bench deps-clang deps-validate validate configure build demo test test-clang test-sanitize fuzz bench clean format
 
 all: build
 
@@ -70,10 +73,21 @@ test-clang: deps deps-clang
 	cmake --build --preset clang --parallel $(JOBS)
 	ctest --preset clang
 
-test-sanitize: deps
+test-sanitize: deps deps-clang
 	cmake --preset sanitize
 	cmake --build --preset sanitize --parallel $(JOBS)
 	ctest --preset sanitize
+
+# The fuzz targets (tests/fuzz) run one after another by default; FUZZ_JOBS=2 runs two at
+# a time. Each works on a scratch copy of its seed corpus (build/fuzz/corpus-work).
+FUZZ_TIME ?= 60
+FUZZ_JOBS ?= 1
+FUZZ_READERS ?= scene image pfm obj stl cli
+
+fuzz: deps deps-clang
+	cmake --preset fuzz
+	cmake --build --preset fuzz --parallel $(JOBS)
+	tests/fuzz/run.sh build/fuzz $(FUZZ_TIME) $(FUZZ_JOBS) $(FUZZ_READERS)
 
 # QUICK=1: shorter timing per micro-benchmark, results under benchmarks/results/quick/.
 BENCH_OUT = benchmarks/results$(if $(QUICK),/quick)
