@@ -338,14 +338,12 @@ TEST_CASE("image structure: stb_image sees only files of the formats it decodes 
     // Real files of every accepted format decode.
     std::vector<unsigned char> grey(48 * 32);
     for (std::size_t k = 0; k < grey.size(); ++k) grey[k] = static_cast<unsigned char>((k * 37) % 251);
-    std::vector<float> linear(grey.begin(), grey.end());
     REQUIRE(stbi_write_jpg((dir / "a.jpg").string().c_str(), 48, 32, 1, grey.data(), 90));
     REQUIRE(stbi_write_bmp((dir / "a.bmp").string().c_str(), 48, 32, 1, grey.data()));
-    REQUIRE(stbi_write_hdr((dir / "a.hdr").string().c_str(), 48, 32, 1, linear.data()));
     std::string pgm = "P5\n# a comment\n48 32\n255\n";
     pgm.append(reinterpret_cast<const char*>(grey.data()), grey.size());
     write_raw(dir / "a.pgm", pgm);
-    for (const char* name : {"a.jpg", "a.bmp", "a.hdr", "a.pgm"}) {
+    for (const char* name : {"a.jpg", "a.bmp", "a.pgm"}) {
         INFO(name);
         const ImageF img = io::read_image_grey(dir / name);
         CHECK(img.cols() == 48);
@@ -361,8 +359,10 @@ TEST_CASE("image structure: stb_image sees only files of the formats it decodes 
         {"stb-png-empty-idat-memcpy-null.png", "a PNG chunk runs past the end"},
         {"stb-pnm-width-int-overflow.ppm", "oversized number"},
         {"stb-psd-matte-float-to-uchar.psd", "not a PNG, JPEG, BMP"},
+        {"stb-hdr-rle-endless-loop.hdr", "a Radiance HDR image (not taken"},
     };
-    for (const auto& [name, reason] : refused) {
+    for (const auto& entry : refused) {
+        const std::string name = entry.first, reason = entry.second;  // clang 14: no lambda capture of bindings
         INFO(name);
         const std::string m = input_error([&] { (void)io::read_image_grey(found / name); });
         CHECK(contains(m, name));

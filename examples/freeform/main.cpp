@@ -925,6 +925,30 @@ int run_design(const DesignArgs& a) {
 }
 
 
+// An error message as one readable line, whatever the input put in it: control bytes
+// (a newline in a key, say) are escaped, and a message longer than 1,000 characters (a
+// megabyte-long key) keeps its start and end around a count of what was left out.
+std::string one_line(const std::string& message) {
+    std::string out;
+    for (const char c : message) {
+        const auto u = static_cast<unsigned char>(c);
+        if (c == '\n')
+            out += "\\n";
+        else if (c == '\t' || c == '\r' || u < 0x20 || u == 0x7f) {
+            char hex[8];
+            std::snprintf(hex, sizeof hex, "\\x%02x", u);
+            out += hex;
+        } else {
+            out += c;
+        }
+    }
+    constexpr std::size_t keep = 480;
+    if (out.size() > 2 * keep + 40)
+        out = out.substr(0, keep) + " ... (" + std::to_string(out.size() - 2 * keep) + " characters left out) ... " +
+              out.substr(out.size() - keep);
+    return out;
+}
+
 // The parsed command line: which command, and its arguments.
 struct CommandLine {
     RenderArgs render;
@@ -1016,7 +1040,7 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
         // One line, like every other input error (CLI11's own report adds a help hint).
-        if (world_rank == 0) std::fprintf(stderr, "freeform: %s (see freeform --help)\n", e.what());
+        if (world_rank == 0) std::fprintf(stderr, "freeform: %s (see freeform --help)\n", one_line(e.what()).c_str());
         return 2;
     }
     cl.is_render = render->parsed();
@@ -1047,13 +1071,13 @@ int cli_main(int argc, char** argv) {
         return run_design(cl.design);
     } catch (const InputError& e) {
         // Every rank reads the same input and finds the same error: one message.
-        if (world_rank == 0) std::fprintf(stderr, "freeform: %s\n", e.what());
+        if (world_rank == 0) std::fprintf(stderr, "freeform: %s\n", one_line(e.what()).c_str());
         return 2;
     } catch (const std::exception& e) {
         if (world_size > 1)
-            std::fprintf(stderr, "freeform: rank %d: internal error: %s\n", world_rank, e.what());
+            std::fprintf(stderr, "freeform: rank %d: internal error: %s\n", world_rank, one_line(e.what()).c_str());
         else
-            std::fprintf(stderr, "freeform: internal error: %s\n", e.what());
+            std::fprintf(stderr, "freeform: internal error: %s\n", one_line(e.what()).c_str());
         return 1;
     }
 }

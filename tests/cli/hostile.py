@@ -91,6 +91,11 @@ write("wider.png", png_announcing(20000, 20000))
 write("noise.ttf", bytes((k * 7919 + 13) % 256 for k in range(4096)))
 write("short.ttf", b"\0\1\0\0\0\x40" + b"\0" * 10)
 write("wide.pfm", b"Pf\n1000000 1000000\n-1\n" + b"\0" * 16)
+write("long-key.json", json.dumps({"light": {"type": "collimated"}, "surface": {}, "receiver": {},
+                                   "k" * 1000000: 1}))
+write("newline-key.json", json.dumps({"light": {"type": "collimated"}, "surface": {}, "receiver": {},
+                                      "a\nb\rc\td": 1}))
+write("long-number.json", '{"light": {"type": "collimated", "rays_per_cell": ' + "9" * 100000 + "}}")
 write("liar.stl", b" " * 80 + struct.pack("<I", 0xFFFFFFFF) + b"\0" * 50)
 write("bad-index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4000000000\n")
 write("garbage.json", bytes(range(256)) * 8)
@@ -104,6 +109,9 @@ cases = [
     ("200,000 nested brackets", ["render", "nested.json"], "json_depth"),
     ("a 17 MB scene file", ["render", "big.json"], "scene_file_bytes"),
     ("a scene that is binary garbage", ["render", "garbage.json"], "garbage.json: invalid JSON"),
+    ("a megabyte-long key", ["render", "long-key.json"], "characters left out"),
+    ("a key with a newline in it", ["render", "newline-key.json"], "a\\nb\\x0dc\\x09d"),
+    ("a number of 100,000 digits", ["render", "long-number.json"], "number overflow"),
     ("a folder as the scene", ["render", "folder.json"], "not a regular file"),
     ("/dev/zero as the scene", ["render", "/dev/zero"], "/dev/zero"),
     ("a PNG target announcing 10^10 pixels",
@@ -145,7 +153,7 @@ for what, args, needle in cases:
     lines = stderr.strip().splitlines()
     if rc != 2:
         fail(f"{what}: exit {rc}, expected 2 ({stderr.strip()[:300]})")
-    if len(lines) != 1 or needle not in stderr:
+    if len(lines) != 1 or needle not in stderr or len(stderr) > 1200:
         fail(f"{what}: expected one line naming '{needle}', got: {stderr.strip()[:400]}")
     if os.path.exists(out):
         fail(f"{what}: the output folder was created")

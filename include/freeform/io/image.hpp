@@ -73,9 +73,10 @@ inline void write_png_pixels(const std::filesystem::path& file, const std::uint8
 // memory errors on crafted files, found by fuzzing (tests/fuzz/regressions/image): a
 // JPEG Huffman table whose code counts exceed 256 writes past a 257-entry array, a PNG
 // whose first IDAT is empty copies from a null pointer, a PNM width of more than nine
-// digits overflows an int. The formats a target comes in are checked here before stb
-// sees them, and the formats nobody designs a target in (PSD, GIF, TGA, PIC) are not
-// passed to it at all. Returns the reason a file is refused, or "" to decode it.
+// digits overflows an int, a cut Radiance HDR file makes its run-length decoder loop
+// forever. The formats a target comes in are checked here before stb sees them, and the
+// formats nobody designs a target in (PSD, GIF, TGA, PIC, and HDR, whose linear values
+// PFM carries) are not passed to it at all. Returns the reason a file is refused, or "" to decode it.
 inline std::string image_structure_problem(std::string_view b) {
     const auto byte = [&](std::size_t k) { return static_cast<unsigned char>(b[k]); };
     const auto be16 = [&](std::size_t k) { return std::size_t(byte(k)) << 8 | byte(k + 1); };
@@ -138,8 +139,8 @@ inline std::string image_structure_problem(std::string_view b) {
         return "";
     }
     if (b.substr(0, 2) == "BM") return "";
-    if (b.substr(0, 11) == "#?RADIANCE\n" || b.substr(0, 7) == "#?RGBE\n") return "";
-    return "not a PNG, JPEG, BMP, binary PGM/PPM, Radiance HDR or PFM image";
+    if (b.substr(0, 2) == "#?") return "a Radiance HDR image (not taken: stb loops forever on some; use PFM)";
+    return "not a PNG, JPEG, BMP, binary PGM/PPM or PFM image";
 }
 
 struct StbiFree {
@@ -151,9 +152,9 @@ struct StbiFree {
 // Decodes the bytes of an image as grey luminance. PNG, JPEG, BMP, binary PGM/PPM:
 // 8-bit values are divided by 255 and 16-bit ones by 65535, colour becomes Rec. 709
 // luma of the stored (gamma-encoded) values, and alpha composites over black
-// (transparent = no light). Radiance HDR files give linear luminance, not clamped to
-// [0, 1]. A ".pfm" extension of `file` (which names the bytes in messages) dispatches to
-// parse_pfm. Throws IoError naming the file and stb's reason on failure, and InputError
+// (transparent = no light). Linear values come as PFM: a ".pfm" extension of `file`
+// (which names the bytes in messages) dispatches to parse_pfm. Radiance HDR, GIF, TGA and
+// PSD are refused (image_structure_problem). Throws IoError naming the file and stb's reason on failure, and InputError
 // when the header announces more than limits.pixels (checked before decoding).
 inline ImageF decode_image_grey(std::string_view bytes, const std::filesystem::path& file,
                                 const Limits& limits = {}) {

@@ -102,6 +102,9 @@ inline std::size_t edit_distance(std::string_view a, std::string_view b) {
 // The closest allowed key, if it is close enough to be a plausible typo.
 inline std::optional<std::string_view> closest_key(std::string_view key, std::span<const std::string_view> allowed) {
     std::optional<std::string_view> best;
+    // No key is longer than 40 characters: a longer one is no typo of any (and the
+    // distance costs its length times each key's).
+    if (key.size() > 64) return best;
     std::size_t best_d = std::numeric_limits<std::size_t>::max();
     for (std::string_view a : allowed) {
         const std::size_t d = edit_distance(key, a);
