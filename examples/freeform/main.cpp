@@ -36,6 +36,7 @@
 #include <freeform/design/cell_means.hpp>
 #include <freeform/design/designer.hpp>
 #include <freeform/design/fabrication.hpp>
+#include <freeform/design/machining.hpp>
 #include <freeform/design/report_json.hpp>
 #include <freeform/design/resources.hpp>
 #include <freeform/io.hpp>
@@ -532,6 +533,21 @@ struct ExportEvaluation {
     std::optional<CellMeans> cells;        // its cell means (error_physical); none without Embree
 };
 
+// metrics.json's "fabrication" block (design/machining.hpp): what a machinist checks.
+json fabrication_json(const MachiningReport& r) {
+    json f;
+    f["cutter_side"] = "+normal of the surface frame: the light's side of a mirror, the air side of a lens's front face";
+    f["min_concave_radius"] = r.min_concave_radius ? json(*r.min_concave_radius) : json(nullptr);
+    f["min_concave_radius_at"] = {r.min_concave_u, r.min_concave_v};
+    f["max_slope_degrees"] = r.max_slope_degrees;
+    f["sag"] = {{"min", r.sag_min}, {"max", r.sag_max}, {"range", r.sag_range()}};
+    f["bounding_box"] = {{"min", {r.box_min.x, r.box_min.y, r.box_min.z}},
+                         {"max", {r.box_max.x, r.box_max.y, r.box_max.z}}};
+    if (r.min_glass_thickness) f["min_glass_thickness"] = *r.min_glass_thickness;
+    f["units"] = "metres and degrees; curvatures from central differences of the heights (design/machining.hpp)";
+    return f;
+}
+
 // Traces a design's exported part (design/exported.hpp): with the design's rays (a
 // diagnostic) and as converged cell means (error_physical, docs/measures.md). Fills
 // metrics' error_exported, energy_exported, error_physical, energy_physical, cell_means
@@ -566,6 +582,7 @@ ExportEvaluation evaluate_export(const Scene& scene, const Heightmap& surface, c
     exported["not_traced"] = "built without Embree";
 #endif
     m["export"] = exported;
+    m["fabrication"] = fabrication_json(machining_report(scene, surface, fabrication.mesh));
     return ev;
 }
 
@@ -906,6 +923,16 @@ int run_design(const DesignArgs& a) {
         if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
         if (error_exported) std::printf("; exported mesh with the design's rays %.4f", *error_exported);
         std::printf(" (docs/measures.md)\n");
+        const json& fab_report = m["fabrication"];
+        std::printf("  machining: smallest concave radius %s, steepest slope %.1f deg, sag %.2f mm%s\n",
+                    fab_report["min_concave_radius"].is_null()
+                        ? "none (nothing concave from the cutter's side)"
+                        : (fixed(fab_report["min_concave_radius"].get<double>() * 1e3, 1) + " mm").c_str(),
+                    fab_report["max_slope_degrees"].get<double>(), fab_report["sag"]["range"].get<double>() * 1e3,
+                    fab_report.contains("min_glass_thickness")
+                        ? (", thinnest glass " + fixed(fab_report["min_glass_thickness"].get<double>() * 1e3, 2) + " mm")
+                              .c_str()
+                        : "");
         const StartReport& st = result.start;
         std::printf("  start: %s%s%s", st.used.c_str(),
                     st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
