@@ -19,6 +19,8 @@
 
 #include <stb_image_write.h>
 
+#include "files.hpp"
+
 namespace fs = std::filesystem;
 using freeform::ImageD;
 using freeform::ImageF;
@@ -30,33 +32,12 @@ namespace io = freeform::io;
 
 namespace {
 
-// A fresh directory under the system temp dir, removed with everything in it.
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::random_device entropy;
-        const auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
-        path = fs::temp_directory_path() /
-               ("freeform_test_io_" + std::to_string(stamp) + "_" + std::to_string(entropy()));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    fs::path operator/(const std::string& name) const { return path / name; }
+using freeform::testing::read_raw;
+using freeform::testing::write_raw;
+
+struct TempDir : freeform::testing::TempDir {
+    TempDir() : freeform::testing::TempDir("freeform_test_io_") {}
 };
-
-void write_raw(const fs::path& file, const std::string& bytes) {
-    std::ofstream out(file, std::ios::binary);
-    out.write(bytes.data(), std::streamsize(bytes.size()));
-    REQUIRE(out.good());
-}
-
-std::string read_raw(const fs::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 std::string float_bytes(float v, bool little_endian) {
     std::uint32_t bits = std::bit_cast<std::uint32_t>(v);

@@ -22,6 +22,7 @@
 
 #include <stb_image_write.h>
 
+#include "files.hpp"
 #include "support.hpp"
 
 namespace fs = std::filesystem;
@@ -29,32 +30,12 @@ using namespace freeform;
 
 namespace {
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::random_device entropy;
-        const auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
-        path = fs::temp_directory_path() /
-               ("freeform_test_limits_" + std::to_string(stamp) + "_" + std::to_string(entropy()));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    fs::path operator/(const std::string& name) const { return path / name; }
+using testing::read_raw;
+using testing::write_raw;
+
+struct TempDir : testing::TempDir {
+    TempDir() : testing::TempDir("freeform_test_limits_") {}
 };
-
-void write_raw(const fs::path& file, const std::string& bytes) {
-    std::ofstream out(file, std::ios::binary);
-    out.write(bytes.data(), std::streamsize(bytes.size()));
-    REQUIRE(out.good());
-}
-
-std::string read_raw(const fs::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 // The message of the InputError f throws ("" and a failed check when it throws none).
 template <class F>
