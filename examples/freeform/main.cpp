@@ -670,6 +670,49 @@ void write_design_outputs(const fs::path& out, const json& m, const std::string&
     staged.commit("metrics.json");
 }
 
+// The summary a design prints (always, --quiet or not): error_physical first, then the
+// diagnostics, the machining figures, the start and where the results are.
+void print_design_summary(const DesignResult& result, const json& m, const std::optional<CellMeans>& cells,
+                          std::size_t triangles, std::pair<double, double> fitted,
+                          const std::optional<double>& error_held_out, const std::optional<double>& error_exported,
+                          const fs::path& out) {
+    const auto [error, energy] = fitted;
+    std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
+                (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
+                result.stopped_early ? " -- best result so far written" : "");
+    if (cells)
+        std::printf("  error_physical %.4f, energy %.4f: cell means of the exported mesh (%zu triangles) traced as "
+                    "flat triangles, %.0f rays per cell\n",
+                    cells->error, cells->totals.energy(), triangles, cells->rays_per_cell);
+    std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
+    if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
+    if (error_exported) std::printf("; exported mesh with the design's rays %.4f", *error_exported);
+    std::printf(" (docs/measures.md)\n");
+    const json& fab_report = m["fabrication"];
+    std::printf("  machining: smallest concave radius %s, steepest slope %.1f deg, sag %.2f mm%s\n",
+                fab_report["min_concave_radius"].is_null()
+                    ? "none (nothing concave from the cutter's side)"
+                    : (fixed(fab_report["min_concave_radius"].get<double>() * 1e3, 1) + " mm").c_str(),
+                fab_report["max_slope_degrees"].get<double>(), fab_report["sag"]["range"].get<double>() * 1e3,
+                fab_report.contains("min_glass_thickness")
+                    ? (", thinnest glass " + fixed(fab_report["min_glass_thickness"].get<double>() * 1e3, 2) + " mm")
+                          .c_str()
+                    : "");
+    const StartReport& st = result.start;
+    std::printf("  start: %s%s%s", st.used.c_str(),
+                st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
+                st.fallback_reason.empty() ? "" : (" (transport not used: " + st.fallback_reason + ")").c_str());
+    if (st.used == "transport" && st.transport.height_excess > 0)
+        std::printf("; it needs %.1f mm of height range, surface.height_bounds allow %.1f mm, so it was clamped "
+                    "(widen the bounds to keep the whole map)",
+                    st.transport.height_range * 1e3,
+                    (st.transport.height_range - st.transport.height_excess) * 1e3);
+    if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
+    std::printf("\n");
+    std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
+                out.string().c_str());
+}
+
 int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
     Scene scene = io::load_scene(a.scene, limits);
@@ -911,42 +954,8 @@ int run_design(const DesignArgs& a) {
     if (!quiet) status.show("writing the results");
     write_design_outputs(a.out, m, csv.str(), heights, irradiance, target_img, fab);
     status.finish();
-    if (!a.quiet || true) {
-        std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
-                    (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
-                    result.stopped_early ? " -- best result so far written" : "");
-        if (cells)
-            std::printf("  error_physical %.4f, energy %.4f: cell means of the exported mesh (%zu triangles) traced as "
-                        "flat triangles, %.0f rays per cell\n",
-                        cells->error, cells->totals.energy(), fab.triangles.size(), cells->rays_per_cell);
-        std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, totals.energy());
-        if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
-        if (error_exported) std::printf("; exported mesh with the design's rays %.4f", *error_exported);
-        std::printf(" (docs/measures.md)\n");
-        const json& fab_report = m["fabrication"];
-        std::printf("  machining: smallest concave radius %s, steepest slope %.1f deg, sag %.2f mm%s\n",
-                    fab_report["min_concave_radius"].is_null()
-                        ? "none (nothing concave from the cutter's side)"
-                        : (fixed(fab_report["min_concave_radius"].get<double>() * 1e3, 1) + " mm").c_str(),
-                    fab_report["max_slope_degrees"].get<double>(), fab_report["sag"]["range"].get<double>() * 1e3,
-                    fab_report.contains("min_glass_thickness")
-                        ? (", thinnest glass " + fixed(fab_report["min_glass_thickness"].get<double>() * 1e3, 2) + " mm")
-                              .c_str()
-                        : "");
-        const StartReport& st = result.start;
-        std::printf("  start: %s%s%s", st.used.c_str(),
-                    st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
-                    st.fallback_reason.empty() ? "" : (" (transport not used: " + st.fallback_reason + ")").c_str());
-        if (st.used == "transport" && st.transport.height_excess > 0)
-            std::printf("; it needs %.1f mm of height range, surface.height_bounds allow %.1f mm, so it was clamped "
-                        "(widen the bounds to keep the whole map)",
-                        st.transport.height_range * 1e3,
-                        (st.transport.height_range - st.transport.height_excess) * 1e3);
-        if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
-        std::printf("\n");
-        std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
-                    a.out.string().c_str());
-    }
+    print_design_summary(result, m, cells, fab.triangles.size(), {error, totals.energy()}, error_held_out,
+                         error_exported, a.out);
     std::signal(SIGINT, SIG_DFL);
     return result.stopped_early ? 130 : 0;
 }
