@@ -362,6 +362,15 @@ TEST_CASE("image structure: stb_image sees only files of the formats it decodes 
     png += std::string("\0\0\0\x0dIHDR\0\0\0\x05\0\0\0\x04\x10\0\0\0\0\x33\xc8\x76\xdf", 25) +
            std::string(empty_idat, 12) + std::string("\0\0\0\0IEND\xae\x42\x60\x82", 12);
     CHECK(contains(input_error([&] { (void)io::decode_image_grey(png, "e.png"); }), "an empty PNG IDAT chunk"));
+    // A real JPEG whose frame header is changed to announce 8000 x 8000 pixels (stb would
+    // decode it, filling what is missing with zeros: 440 MB for a 2 KB file).
+    std::string forged = read_raw(dir / "a.jpg");
+    const std::size_t sof = forged.find("\xFF\xC0");
+    REQUIRE(sof != std::string::npos);
+    forged[sof + 5] = char(8000 >> 8), forged[sof + 6] = char(8000 & 0xff);
+    forged[sof + 7] = char(8000 >> 8), forged[sof + 8] = char(8000 & 0xff);
+    CHECK(contains(input_error([&] { (void)io::decode_image_grey(forged, "f.jpg"); }),
+                   "announces 8000 x 8000 pixels in"));
     // GIF, TGA (no signature) and PSD are not taken.
     CHECK(contains(input_error([&] { (void)io::decode_image_grey("GIF89a\x01\x00\x01\x00", "g.gif"); }),
                    "not a PNG, JPEG"));

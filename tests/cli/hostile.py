@@ -88,6 +88,14 @@ assert rc == 2, "a missing scene must exit 2"
 write("nested.json", "[" * 200000 + "]" * 200000)
 write("wide.png", png_announcing(100000, 100000))
 write("wider.png", png_announcing(20000, 20000))
+write("forged.jpg", bytes.fromhex(
+    "ffd8ffdb004300080606070605080707070909080a0c140d0c0b0b0c1912130f141d1a1f1e1d1a1c1c20242e2720222c231c1c28"
+    "37292c30313434341f27393d38323c2e333432ffc0000b081f401f400101110000ffc4001f000001050101010101010000000000"
+    "0000000102030405060708090a0bffc400b5100002010303020403050504040000017d01020300041105122131410613516107"
+    "227114328191a1082342b1c11552d1f02433627282090a161718191a25262728292a3435363738393a434445464748494a5354"
+    "55565758595a636465666768696a737475767778797a838485868788898a92939495969798999aa2a3a4a5a6a7a8a9aab2b3b4"
+    "b5b6b7b8b9bac2c3c4c5c6c7c8c9cad2d3d4d5d6d7d8d9dae1e2e3e4e5e6e7e8e9eaf1f2f3f4f5f6f7f8f9faffda0008010100"
+    "003f00fbd3ffd9"))
 write("noise.ttf", bytes((k * 7919 + 13) % 256 for k in range(4096)))
 write("short.ttf", b"\0\1\0\0\0\x40" + b"\0" * 10)
 write("wide.pfm", b"Pf\n1000000 1000000\n-1\n" + b"\0" * 16)
@@ -118,6 +126,8 @@ cases = [
      ["render", scene("png-target.json", target={"image": "wide.png"})], "wide.png"),
     ("a PNG target announcing 4 x 10^8 pixels",
      ["render", scene("png-target2.json", target={"image": "wider.png"})], "the limit pixels"),
+    ("a 300-byte JPEG announcing 8000 x 8000 pixels",
+     ["render", scene("jpg-target.json", target={"image": "forged.jpg"})], "forged.jpg"),
     ("a font that is noise", ["render", scene("font1.json", target={"text": "E", "font": "noise.ttf"})],
      "noise.ttf"),
     ("a font whose table directory runs past its end",

@@ -179,6 +179,14 @@ inline ImageF decode_image_grey(std::string_view bytes, const std::filesystem::p
         over_limit("image '" + file.string() + "': " + std::to_string(width) + " x " + std::to_string(height) +
                        " pixels",
                    "pixels", std::to_string(limits.pixels));
+    // No format taken here packs more than about a thousand pixels into a byte (deflate's
+    // limit is 1032:1 on PNG's raw bytes; a uniform JPEG needs a byte per 85-130 pixels);
+    // a header that announces more is a cut file or a forged one, and stb would fill the
+    // missing pixels with zeros (a 2 KB JPEG announcing 8000 x 8000: 2.4 s, 440 MB).
+    if (std::uint64_t(width) * std::uint64_t(height) > 2048 * std::uint64_t(bytes.size()))
+        throw IoError("cannot read image '" + file.string() + "': its header announces " + std::to_string(width) +
+                      " x " + std::to_string(height) + " pixels in " + std::to_string(bytes.size()) +
+                      " bytes, more than any PNG, JPEG, BMP or PGM/PPM can hold (a cut file or a forged header)");
     const bool hdr = stbi_is_hdr_from_memory(data, size) != 0;
     const bool sixteen = !hdr && stbi_is_16_bit_from_memory(data, size) != 0;
     std::unique_ptr<void, detail::StbiFree> pixels;
