@@ -11,6 +11,7 @@
 // (tessellation, Embree's copy, OBJ/STL text). The figures below round these up.
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
 #include <string>
 
 #include "../core/limits.hpp"
@@ -93,13 +94,10 @@ inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads
         if (p.bytes > largest->bytes) largest = &p;
     }
     plan.rays = std::int64_t(std::min(std::max(peak_rays, cell_mean_rays), 9.0e18));
-    char buffer[160];
-    std::snprintf(buffer, sizeof buffer, "%s: %s", largest->what, format_bytes(largest->bytes).c_str());
-    plan.largest = buffer;
-    if (largest == &parts[0]) {
-        std::snprintf(buffer, sizeof buffer, "%.3g rays: %s", peak_rays, format_bytes(largest->bytes).c_str());
-        plan.largest = buffer;
-    }
+    char count[32];
+    std::snprintf(count, sizeof count, "%.3g rays", peak_rays);
+    plan.largest = (largest == &parts[0] ? std::string(count) : std::string(largest->what)) + ": " +
+                   format_bytes(largest->bytes);
     return plan;
 }
 

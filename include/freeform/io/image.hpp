@@ -175,10 +175,7 @@ inline ImageF decode_image_grey(std::string_view bytes, const std::filesystem::p
     int width = 0, height = 0, channels = 0;
     if (!stbi_info_from_memory(data, size, &width, &height, &channels)) throw failure();
     if (width <= 0 || height <= 0) throw IoError("cannot read image '" + file.string() + "': no pixels");
-    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels)
-        over_limit("image '" + file.string() + "': " + std::to_string(width) + " x " + std::to_string(height) +
-                       " pixels",
-                   "pixels", std::to_string(limits.pixels));
+    detail::check_pixel_count(width, height, "image '" + file.string() + "'", limits);
     // No format taken here packs more than about a thousand pixels into a byte (deflate's
     // limit is 1032:1 on PNG's raw bytes; a uniform JPEG needs a byte per 85-130 pixels);
     // a header that announces more is a cut file or a forged one, and stb would fill the

@@ -58,6 +58,15 @@ private:
     std::size_t pos_ = 0;
 };
 
+// Refuses an image of width × height pixels over limits.pixels (`what` names the format
+// and the file in the message), before anything is decoded.
+inline void check_pixel_count(std::int64_t width, std::int64_t height, const std::string& what,
+                              const Limits& limits) {
+    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels)
+        over_limit(what + ": " + std::to_string(width) + " x " + std::to_string(height) + " pixels", "pixels",
+                   std::to_string(limits.pixels));
+}
+
 // Largest accepted side: keeps width × height × 12 far from overflow and rejects
 // garbage headers before they turn into huge allocations.
 inline constexpr long long pfm_max_side = 1 << 20;
@@ -88,10 +97,7 @@ inline ImageF parse_pfm(std::string_view bytes, const std::filesystem::path& fil
     };
     const int width = parse_side("width");
     const int height = parse_side("height");
-    if (std::uint64_t(width) * std::uint64_t(height) > limits.pixels)
-        over_limit("PFM '" + file.string() + "': " + std::to_string(width) + " x " + std::to_string(height) +
-                       " pixels",
-                   "pixels", std::to_string(limits.pixels));
+    detail::check_pixel_count(width, height, "PFM '" + file.string() + "'", limits);
 
     const std::string_view scale_token = header.next_token("scale");
     double scale = 0;
