@@ -10,7 +10,6 @@
 #include <freeform/io/staged_output.hpp>
 #include <freeform/scene/json.hpp>
 
-#include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -170,9 +169,7 @@ TEST_CASE("triangles: STL and OBJ counted before the mesh is built") {
 
 TEST_CASE("json_depth: nested brackets refused in one pass, with the position") {
     const std::string nested = std::string(200000, '[') + std::string(200000, ']');
-    const auto t0 = std::chrono::steady_clock::now();
     const std::string m = input_error([&] { (void)io::parse_scene(nested, "deep.json", {}); });
-    CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(5));
     CHECK(contains(m, "deep.json: arrays and objects nested deeper than 64 levels at line 1, column 65"));
     CHECK(contains(m, "json_depth = 64"));
 
@@ -190,13 +187,12 @@ TEST_CASE("json_depth: nested brackets refused in one pass, with the position") 
     const std::string at_limit = std::string(64, '[') + std::string(64, ']');
     CHECK(contains(input_error([&] { (void)io::parse_scene(at_limit, "s.json", {}); }), "s.json: scene: expected an object"));
 
-    // With the depth check raised, parsing a deep file stays linear: the duplicate-key
-    // check keeps one key per level and builds a path only for its message.
+    // With the depth check raised, a deep file still parses (the duplicate-key check keeps
+    // one key per level and builds a path only for its message; tests/cli/hostile.py
+    // watches the memory of the command line on such files).
     Limits raised;
     raised.json_depth = 1 << 20;
-    const auto t1 = std::chrono::steady_clock::now();
     CHECK(contains(input_error([&] { (void)io::parse_scene(nested, "deep.json", {}, raised); }), "expected an object"));
-    CHECK(std::chrono::steady_clock::now() - t1 < std::chrono::seconds(20));
     CHECK(contains(input_error([&] {
                        (void)io::parse_scene("{\"a\": [1, {\"b\": {\"c\": 1, \"c\": 2}}]}", "d.json", {});
                    }),

@@ -3,16 +3,17 @@
 
     hostile.py FREEFORM SCENE_DIR WORK
 
-1. Hostile inputs: each must exit with 2 within a second, print one line on stderr that
-   names the file or key, stay under 100 MB of memory beyond what the program needs to
-   reject a missing file, and create no output.
+1. Hostile inputs: each must exit with 2, print one line on stderr that names the file
+   or key, stay under 100 MB of memory beyond what the program needs to reject a missing
+   file, and create no output. The time each takes is printed, not asserted (speed is
+   measured in benchmarks/, never asserted in tests); issue 25's goal of 1 s is read here.
 2. Write failures (a file-size limit, as a full disk would give): exit non-zero, the
    message names the file, the previous results stay as they were, nothing is left over.
 3. Killed while writing (SIGXFSZ at several points of the output, and SIGKILL at several
    moments of a run): no output folder ever reads as complete unless it is.
 
 Standard library only (Debian's python3). Under AddressSanitizer (ASAN_OPTIONS set by the
-sanitizer test preset) time and memory are not measured, only behaviour.
+sanitizer test preset) memory is not checked, only behaviour.
 """
 import json
 import os
@@ -167,8 +168,6 @@ for what, args, needle in cases:
         fail(f"{what}: expected one line naming '{needle}', got: {stderr.strip()[:400]}")
     if os.path.exists(out):
         fail(f"{what}: the output folder was created")
-    if not SANITIZED and seconds > 1.0:
-        fail(f"{what}: took {seconds:.2f} s (limit 1 s)")
     if not SANITIZED and peak_mb - baseline_mb > 100:
         fail(f"{what}: peak memory {peak_mb:.0f} MB, {peak_mb - baseline_mb:.0f} MB over the baseline")
     print(f"ok   {what}: exit {rc} in {seconds:.2f} s, peak {peak_mb:.0f} MB (baseline {baseline_mb:.0f}): "
