@@ -337,6 +337,8 @@ TEST_CASE("image structure: stb_image sees only files of the formats it decodes 
         {"stb-pnm-width-int-overflow.ppm", "oversized number"},
         {"stb-psd-matte-float-to-uchar.psd", "not a PNG, JPEG, BMP"},
         {"stb-hdr-rle-endless-loop.hdr", "a Radiance HDR image (not taken"},
+        {"stb-jpeg-progressive-undefined-ac-table.jpg", "a JPEG scan that uses an undefined Huffman table"},
+        {"stb-jpeg-ac-table-before-its-dht.jpg", "a JPEG scan that uses an undefined Huffman table"},
     };
     for (const auto& entry : refused) {
         const std::string name = entry.first, reason = entry.second;  // clang 14: no lambda capture of bindings
@@ -344,6 +346,14 @@ TEST_CASE("image structure: stb_image sees only files of the formats it decodes 
         const std::string m = input_error([&] { (void)io::read_image_grey(found / name); });
         CHECK(contains(m, name));
         CHECK(contains(m, reason));
+    }
+    // The scan check lets real files through: baseline, progressive (DC scans name AC
+    // tables they do not use) and chroma-subsampled JPEGs from an encoder decode.
+    const fs::path seeds = fs::path(FREEFORM_SOURCE_DIR) / "tests" / "fuzz" / "corpus" / "image";
+    for (const char* name : {"baseline-16x8.jpg", "progressive-16x8.jpg", "subsampled-16x16.jpg", "grey-8x8.jpg"}) {
+        INFO(name);
+        CHECK(io::detail::image_structure_problem(read_raw(seeds / name)).empty());
+        CHECK(io::read_image_grey(seeds / name).size() > 0);
     }
     // A Huffman table of 257 codes made by hand (SOI, DHT with counts 15 x 16 + 17), and a
     // PNG whose first IDAT is empty, whole.

@@ -22,6 +22,7 @@ run_one() {
     local exe="$build/bin/fuzz_$reader"
     local work="$build/corpus-work/$reader" artifacts="$build/artifacts/$reader" log="$build/logs/$reader.log"
     mkdir -p "$work" "$artifacts" "$build/logs"
+    touch "$build/logs/$reader.start"  # findings of this run are the artifacts newer than this
     if [[ ! -x "$exe" ]]; then
         echo "fuzz_$reader: $exe not built" > "$log"
         return 1
@@ -58,6 +59,17 @@ for reader in "$@"; do
     printf '%-6s %8s %8s %10s %8s %s\n' "$reader" "${cov:--}" "${ft:--}" "${execs:--}" "${rss:--}" "$result"
 done
 if [[ ${#failed[@]} -gt 0 ]]; then
+    # A CI log may be all anyone sees of a finding: print the report and the input itself
+    # (base64, for inputs up to 64 KiB) so that it can be rebuilt and replayed.
+    for reader in "${failed[@]}"; do
+        echo
+        echo "---- fuzz_$reader: report ----"
+        grep -m 1 -A 40 -E '^(==[0-9]+==|.*runtime error:|.*ERROR: libFuzzer)' "$build/logs/$reader.log" | head -n 40
+        find "$build/artifacts/$reader" -type f -newer "$build/logs/$reader.start" | while read -r input; do
+            echo "---- input $(basename "$input") ($(stat -c %s "$input") bytes, base64; base64 -d > file) ----"
+            if [[ $(stat -c %s "$input") -le 65536 ]]; then base64 "$input"; else echo "(too large to print)"; fi
+        done
+    done
     echo "fuzz: findings in: ${failed[*]} (docs/fuzzing.md says how to reproduce and keep them)" >&2
     exit 1
 fi

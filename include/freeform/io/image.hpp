@@ -72,7 +72,8 @@ inline void write_png_pixels(const std::filesystem::path& file, const std::uint8
 // What stb_image is trusted to decode. Its decoders (Debian's libstb, v2.27) have known
 // memory errors on crafted files, found by fuzzing (tests/fuzz/regressions/image): a
 // JPEG Huffman table whose code counts exceed 256 writes past a 257-entry array, a PNG
-// whose first IDAT is empty copies from a null pointer, a PNM width of more than nine
+// whose first IDAT is empty copies from a null pointer, a JPEG scan that names a Huffman
+// table no DHT segment has defined decodes with uninitialised memory and indexes out of bounds, a PNM width of more than nine
 // digits overflows an int, a cut Radiance HDR file makes its run-length decoder loop
 // forever. The formats a target comes in are checked here before stb sees them, and the
 // formats nobody designs a target in (PSD, GIF, TGA, PIC, and HDR, whose linear values
@@ -93,8 +94,10 @@ inline std::string image_structure_problem(std::string_view b) {
         return "";
     }
     if (b.size() >= 3 && byte(0) == 0xFF && byte(1) == 0xD8 && byte(2) == 0xFF) {
-        // Walk the markers (and past entropy-coded data) to every Huffman table.
+        // Walk the markers (and past entropy-coded data) to every Huffman table and scan.
         std::size_t at = 2;
+        bool progressive = false;
+        unsigned defined[2] = {0, 0};  // bit k: DC (0) / AC (1) Huffman table k seen so far
         while (at + 4 <= b.size()) {
             if (byte(at) != 0xFF) {  // entropy-coded data: up to the next real marker
                 ++at;
@@ -114,8 +117,25 @@ inline std::string image_structure_problem(std::string_view b) {
                     std::size_t codes = 0;
                     for (std::size_t k = 1; k <= 16; ++k) codes += byte(t + k);
                     if (codes > 256) return "a JPEG Huffman table with more than 256 codes";
+                    if ((byte(t) >> 4) <= 1 && (byte(t) & 15) <= 3) defined[byte(t) >> 4] |= 1u << (byte(t) & 15);
                     t += 17 + codes;
                     if (t > at + 2 + length) return "a truncated JPEG Huffman table";
+                }
+            }
+            if (marker >= 0xC0 && marker <= 0xC2) progressive = marker == 0xC2;
+            if (marker == 0xDA) {
+                // A scan decodes with tables it names; stb reads an undefined one from
+                // uninitialised memory. Baseline scans use both; a progressive scan the DC
+                // table (first DC pass) or the AC table (spectral bands above 0).
+                const std::size_t count = length >= 3 ? byte(at + 4) : 0;
+                if (length < 6 + 2 * count) return "a truncated JPEG scan header";
+                const std::size_t after = at + 5 + 2 * count;
+                const bool dc_scan = byte(after) == 0, first_pass = (byte(after + 2) >> 4) == 0;
+                for (std::size_t c = 0; c < count; ++c) {
+                    const unsigned dc = byte(at + 6 + 2 * c) >> 4, ac = byte(at + 6 + 2 * c) & 15;
+                    const bool need_dc = !progressive || (dc_scan && first_pass), need_ac = !progressive || !dc_scan;
+                    if ((need_dc && (dc > 3 || !(defined[0] >> dc & 1))) || (need_ac && (ac > 3 || !(defined[1] >> ac & 1))))
+                        return "a JPEG scan that uses an undefined Huffman table";
                 }
             }
             at += 2 + length;
