@@ -29,11 +29,18 @@ struct WavyScene {
     RaySet rays;
 };
 
-WavyScene wavy_scene(Deposit d) {
+// A wavy mirror under a point light; or (fresnel_lens) a wavy lens with Fresnel losses,
+// the receiver below it.
+WavyScene wavy_scene(Deposit d, bool fresnel_lens = false) {
     Scene s = basic_scene(80, 16);
     s.receiver.deposit = d;
     s.receiver.size = {0.4, 0.4};
     s.light.shape = PointLight{{0.01, 0.0, 0.3}, {}, {}};
+    if (fresnel_lens) {
+        s.surface.material = Lens{1.5, 0.01};
+        s.receiver.frame = make_frame({0, 0, -0.3}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.trace.fresnel = true;
+    }
     Heightmap hm = surface_for(s, 41);
     shape(hm, [](double u, double v) { return 0.003 * std::sin(60 * u) * std::cos(45 * v); });
     RaySet rays = generate_rays(s.light, hm, s.receiver, 3);
@@ -101,7 +108,7 @@ TEST_CASE("the GPU tracer's record kernel gives HeightfieldTracer's records unde
     Histogram from_records(w.scene.receiver.width, w.scene.receiver.height);
     TraceTotals totals_from_records;
     for (std::size_t k = 0; k < n; ++k) {
-        totals_from_records.add(records[k].status, w.rays.weight[k]);
+        totals_from_records.add(records[k], w.rays.weight[k]);
         deposit_record(pp.receiver, records[k], w.rays.weight[k], from_records.cells);
     }
     const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::seq);
@@ -112,8 +119,12 @@ TEST_CASE("the GPU tracer's record kernel gives HeightfieldTracer's records unde
 }
 
 TEST_CASE("the GPU tracer's trace-and-deposit kernel equals HeightfieldTracer::trace_all, serial and parallel") {
-    for (const Deposit d : {Deposit::nearest, Deposit::bilinear, Deposit::fine_bilinear}) {
-        const WavyScene w = wavy_scene(d);
+    const std::pair<Deposit, bool> cases[] = {
+        {Deposit::nearest, false}, {Deposit::bilinear, false}, {Deposit::fine_bilinear, false}, {Deposit::bilinear, true}};
+    for (const auto& c : cases) {
+        const bool lens = c.second;  // a lens with Fresnel losses
+        CAPTURE(lens);
+        const WavyScene w = wavy_scene(c.first, lens);
         const PathParams pp = make_path_params(w.scene);
         const Traced full = trace_scene(w.scene, w.surface, w.rays, exec::omp);
         const std::size_t cells = full.histogram.cells.size();
@@ -135,6 +146,7 @@ TEST_CASE("the GPU tracer's trace-and-deposit kernel equals HeightfieldTracer::t
         CHECK(t.weight_by_status == full.totals.weight_by_status);
         CHECK(t.rays_hit_receiver == full.totals.rays_hit_receiver);
         CHECK(t.rays == full.totals.rays);
+        if (lens) CHECK(full.totals.fresnel_reflected() > 0);
     }
 }
 

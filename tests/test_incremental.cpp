@@ -104,6 +104,16 @@ std::vector<Case> cases() {
         out.push_back({"collimated lens", s, 25});
     }
     {
+        // A sun of 3 degrees' radius over a lens with Fresnel losses: every ray has its
+        // own direction, and its own transmitted part of its weight.
+        Scene s = basic_scene(40, 8);
+        s.light.shape = CollimatedLight{{0.05, 0, -1}, 3.0};
+        s.surface.material = Lens{1.49, 0.01};
+        s.receiver.frame = make_frame({0, 0, -0.4}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.trace.fresnel = true;
+        out.push_back({"sunlit lens, Fresnel", s, 25});
+    }
+    {
         // Grazing light (75 degrees): rays cross many cells inside the slab and
         // interreflect on the bumps.
         Scene s = basic_scene(40, 8);

@@ -111,6 +111,91 @@ TEST_CASE("refractive solids are checked: closed, oriented, outward") {
                          InputError);
 }
 
+namespace {
+
+// Unpolarised Fresnel transmittance from the angles (Fresnel's sine and tangent laws),
+// written apart from the tracer's cosine form.
+double fresnel_by_angles(double theta_i, double n1, double n2) {
+    if (theta_i == 0) return 1 - std::pow((n1 - n2) / (n1 + n2), 2);
+    const double theta_t = std::asin(n1 / n2 * std::sin(theta_i));
+    const double rs = std::pow(std::sin(theta_i - theta_t) / std::sin(theta_i + theta_t), 2);
+    const double rp = std::pow(std::tan(theta_i - theta_t) / std::tan(theta_i + theta_t), 2);
+    return 1 - 0.5 * (rs + rp);
+}
+
+// A lens of index n under light straight down, the receiver 0.5 m below facing up.
+Scene fresnel_lens(double n, double thickness, bool fresnel) {
+    Scene s = basic_scene(50, 16);
+    s.surface.material = Lens{n, thickness};
+    s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+    s.receiver.size = {0.2, 0.2};
+    s.trace.fresnel = fresnel;
+    return s;
+}
+
+Fixed slot_sum(const TraceTotals& t) {
+    Fixed sum = 0;
+    for (const Fixed w : t.weight_by_status) sum += w;
+    return sum;
+}
+
+}  // namespace
+
+TEST_CASE("Fresnel: a flat lens at normal incidence passes (1 - R)^2; the rest is counted as reflected") {
+    const double n = 1.5, r = std::pow((n - 1) / (n + 1), 2);  // 0.04 per face
+    Scene s = fresnel_lens(n, 0.01, false);
+    const Heightmap flat = surface_for(s, 21);
+    const Traced off = trace_scene(s, flat);
+    CHECK(off.totals.energy() == 1.0);  // off: today's model, nothing lost
+    CHECK(off.totals.fresnel_reflected() == 0);
+
+    s.trace.fresnel = true;
+    const Traced on = trace_scene(s, flat);
+    const double single_pass = (1 - r) * (1 - r);         // 0.9216
+    const double all_reflections = single_pass / (1 - r * r);  // 0.92308: internal reflections followed
+    MESSAGE("slab, Fresnel: energy ", on.totals.energy(), " (closed forms ", single_pass, ", ", all_reflections, ")");
+    CHECK(on.totals.energy() == doctest::Approx(single_pass).epsilon(1e-6));
+    CHECK(std::abs(on.totals.energy() - all_reflections) < 0.002);  // the issue's goal
+    // Every unit of weight is accounted for: delivered, or reflected away.
+    CHECK(slot_sum(on.totals) == on.totals.emitted);
+    CHECK(double(on.totals.fresnel_reflected()) / double(on.totals.emitted) == doctest::Approx(1 - single_pass).epsilon(1e-5));
+    // The same footprint, each cell scaled by the transmittance.
+    for (std::size_t k = 0; k < on.histogram.cells.size(); ++k)
+        CHECK(double(on.histogram.cells[k]) == doctest::Approx(single_pass * double(off.histogram.cells[k])).epsilon(1e-6));
+}
+
+TEST_CASE("Fresnel: a tilted lens face passes T(front) T(back), the two found from the angles") {
+    for (const double degrees : {10.0, 30.0, 45.0}) {
+        CAPTURE(degrees);
+        const double n = 1.5, alpha = degrees * pi / 180;
+        Scene s = fresnel_lens(n, 0.08, true);
+        s.surface.h_min = -0.06, s.surface.h_max = 0.06;
+        s.receiver.size = {1.2, 1.2};  // the wedge bends the beam up to 0.25 m aside
+        Heightmap wedge = surface_for(s, 21);
+        shape(wedge, [&](double u, double) { return u * std::tan(alpha); });
+        const RaySet rays = generate_rays(s.light, wedge, s.receiver, 1);
+        // Light straight down meets the face at alpha, runs alpha - beta from the vertical
+        // inside, and leaves through the flat back face at that angle.
+        const double beta = std::asin(std::sin(alpha) / n);
+        const double expected = fresnel_by_angles(alpha, 1.0, n) * fresnel_by_angles(alpha - beta, n, 1.0);
+        std::vector<std::int32_t> ids;
+        for (std::int64_t k = 0; k < rays.size(); ++k)
+            if (std::abs(rays.origin[std::size_t(k)].x) < 0.02) ids.push_back(std::int32_t(k));  // far from the side walls
+        std::vector<RayRecord> rec(ids.size());
+        HeightfieldTracer(wedge, rays, make_path_params(s)).trace(exec::seq, ids, rec);
+        double worst = 0;
+        int received = 0;
+        for (const RayRecord& x : rec) {
+            if (x.status != RayStatus::receiver) continue;
+            ++received;
+            worst = std::max(worst, std::abs(double(x.transmit) - expected));
+        }
+        MESSAGE(degrees, " degrees: T = ", expected, ", worst record off by ", worst);
+        CHECK(received == int(ids.size()));
+        CHECK(worst < 2e-6);
+    }
+}
+
 #if defined(FREEFORM_WITH_EMBREE)
 
 namespace {
@@ -388,6 +473,27 @@ TEST_CASE("light that meets the lens model's side wall is reflected inside, as i
     CHECK(model.totals.energy() > 0.999);  // absorbing walls would lose about 2 %
     CHECK(solid.totals.energy() > 0.999);
     CHECK(l1 < 0.002);
+}
+
+TEST_CASE("Fresnel on refractive meshes: a glass box at normal and at 30 degrees' incidence") {
+    const double n = 1.5;
+    const ExtraMesh slab{box({-0.2, -0.2, -0.011}, {0.2, 0.2, -0.001}), MeshMaterial::refractive(n)};
+    for (const double degrees : {0.0, 30.0}) {
+        CAPTURE(degrees);
+        const double theta = degrees * pi / 180;
+        Scene s = lens_bench(0.5, 0.6, 60);
+        s.light.shape = CollimatedLight{{std::sin(theta), 0, -std::cos(theta)}};
+        s.receiver.frame = make_frame({0.5 * std::tan(theta), 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.trace.fresnel = true;
+        const RaySet rays = generate_rays(s.light, surface_for(s, 21), s.receiver, 1);
+        const Traced t = trace_meshes(s, rays, {slab});
+        // In at theta, out at the refracted angle: the same transmittance twice.
+        const double face = fresnel_by_angles(theta, 1.0, n);
+        CHECK(t.totals.energy() == doctest::Approx(face * face).epsilon(1e-6));
+        CHECK(slot_sum(t.totals) == t.totals.emitted);
+        s.trace.fresnel = false;
+        CHECK(trace_meshes(s, rays, {slab}).totals.energy() == 1.0);
+    }
 }
 
 TEST_CASE("the tracer refuses refractive meshes that do not bound a solid") {

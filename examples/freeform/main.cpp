@@ -259,7 +259,7 @@ RenderOutcome render_with(const T& tracer, const RaySet& rays, int threads, Stat
         tracer.trace(exec::omp_t{threads}, ids, records);
         for (std::size_t k = 0; k < ids.size(); ++k) {
             const Fixed w = rays.weight[std::size_t(ids[k])];
-            out.totals.add(records[k].status, w);
+            out.totals.add(records[k], w);
             deposit_record(pp.receiver, records[k], w, out.histogram.cells);
         }
         const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -280,6 +280,7 @@ json totals_json(const TraceTotals& t) {
     j["total_internal_reflection"] = double(t.lost_tir()) / n;
     j["max_depth"] = double(t.weight_by_status[std::size_t(RayStatus::lost_depth)]) / n;
     j["absorbed"] = double(t.weight_by_status[std::size_t(RayStatus::absorbed)]) / n;
+    if (t.fresnel_reflected() != 0) j["fresnel_reflected"] = double(t.fresnel_reflected()) / n;
     return j;
 }
 

@@ -97,6 +97,22 @@ FREEFORM_HD inline bool refract(Vec3T<T> d, Vec3T<T> n, T eta_from, T eta_to, Ve
     return true;
 }
 
+// Unpolarised Fresnel transmittance of a smooth interface for light meeting it at
+// cos_i (cosine to the normal, in [0, 1]) going from index eta_from into eta_to: the
+// mean of the s and p power transmittances, 1 - (r_s^2 + r_p^2) / 2. Zero beyond the
+// critical angle. At normal incidence 1 - ((n1 - n2) / (n1 + n2))^2 (0.96 for 1 -> 1.5).
+template <class T>
+FREEFORM_HD inline T fresnel_transmittance(T cos_i, T eta_from, T eta_to) {
+    cos_i = std::fmin(std::fabs(cos_i), T(1));
+    const T eta = eta_from / eta_to;
+    const T sin2_t = eta * eta * (T(1) - cos_i * cos_i);
+    if (sin2_t >= T(1)) return T(0);
+    const T cos_t = std::sqrt(T(1) - sin2_t);
+    const T rs = (eta_from * cos_i - eta_to * cos_t) / (eta_from * cos_i + eta_to * cos_t);
+    const T rp = (eta_from * cos_t - eta_to * cos_i) / (eta_from * cos_t + eta_to * cos_i);
+    return T(1) - T(0.5) * (rs * rs + rp * rp);
+}
+
 inline constexpr double pi = 3.14159265358979323846;
 
 constexpr double degrees_to_radians(double deg) { return deg * (pi / 180.0); }

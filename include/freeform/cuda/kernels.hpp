@@ -33,8 +33,8 @@ FREEFORM_HD inline void atomic_add(unsigned long long* p, unsigned long long v) 
 // the counters; ray k adds to lane k % totals_lanes, so the threads of a warp spread over
 // different addresses instead of queueing on one.
 inline constexpr int totals_lanes = 32;
-inline constexpr int totals_slots = 8;  // weight by RayStatus (0..5), rays on the receiver, spare
-inline constexpr int totals_hits_slot = 6;
+inline constexpr int totals_slots = 8;  // weight by slot (RayStatus 0..5, Fresnel 6), rays on the receiver
+inline constexpr int totals_hits_slot = 7;
 
 // The deposit target of `deposit`: one fixed-point histogram cell per index.
 struct AtomicCells {
@@ -59,12 +59,13 @@ struct TraceDepositKernel {
 
     FREEFORM_HD void operator()(std::int64_t k) const {
         const RayRecord rec = trace_heightfield_ray(hf, pp, origin[k], direction[k], NoCellVisitor{});
-        const Fixed w = weight[k];
+        const Fixed w = weight[k], delivered = delivered_weight(rec, w);
         unsigned long long* lane = totals + (k % totals_lanes) * totals_slots;
-        atomic_add(lane + int(rec.status), static_cast<unsigned long long>(w));
+        atomic_add(lane + int(rec.status), static_cast<unsigned long long>(delivered));
+        if (delivered != w) atomic_add(lane + int(fresnel_reflected_slot), static_cast<unsigned long long>(w - delivered));
         if (rec.status != RayStatus::receiver) return;
         atomic_add(lane + totals_hits_slot, 1ull);
-        deposit(pp.receiver, rec.px, rec.py, w, AtomicCells{cells});
+        deposit(pp.receiver, rec.px, rec.py, delivered, AtomicCells{cells});
     }
 };
 

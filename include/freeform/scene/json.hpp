@@ -453,7 +453,7 @@ inline Light read_light(const json& j, const SurfaceSpec& surface) {
     const int type = enumeration(o.require("type"), o.at("type"), light_type_names);
     static constexpr std::array<std::string_view, 3> common{"type", "rays_per_cell", "rays"};
     static constexpr std::array<std::array<std::string_view, 3>, 3> own{
-        {{"direction", "", ""}, {"position", "axis", "profile"}, {"center", "normal", "radius"}}};
+        {{"direction", "angular_radius", ""}, {"position", "axis", "profile"}, {"center", "normal", "radius"}}};
     std::vector<std::string_view> allowed(common.begin(), common.end());
     for (std::string_view k : own[std::size_t(type)])
         if (!k.empty()) allowed.push_back(k);
@@ -493,6 +493,13 @@ inline Light read_light(const json& j, const SurfaceSpec& surface) {
             if (!(dot(normalize(c.direction), sf.w) < -1e-9))
                 throw error(o.at("direction"), "must point towards the surface's front (against surface.normal), got " +
                                                    vec_json(c.direction).dump());
+            if (const json* v = o.find("angular_radius"))
+                c.angular_radius = number_in(*v, o.at("angular_radius"), 0, max_angular_radius);
+            const double tilt = std::acos(std::clamp(-dot(normalize(c.direction), sf.w), -1.0, 1.0)) * 180.0 / pi;
+            if (c.angular_radius > 0 && tilt + c.angular_radius >= 89.0)
+                throw error(o.at("angular_radius"), "the source's edge, " + format_number(c.angular_radius) +
+                                                        " degrees around light.direction, would graze the surface "
+                                                        "(it is tilted " + format_number(tilt) + " degrees from its normal)");
             light.shape = c;
             break;
         }
@@ -584,23 +591,24 @@ inline std::vector<MeshSpec> read_meshes(const json& j, const std::filesystem::p
     return meshes;
 }
 
-inline TraceSpec read_trace(const json& j) {
-    const Object o(j, "trace");
-    static constexpr std::array<std::string_view, 2> keys{"tracer", "max_depth"};
-    o.only(keys);
-    TraceSpec t;
-    if (const json* v = o.find("tracer")) t.tracer = enumeration(*v, o.at("tracer"), tracer_names);
-    if (const json* v = o.find("max_depth")) t.max_depth = int(integer(*v, o.at("max_depth"), 1, 64));
-    return t;
-}
-
-// The optimiser keys, one row each: name, how to read it (validating), how to write it.
-// Adding a setting is adding a row (and a field to OptimiseSpec).
 inline bool boolean(const json& v, const std::string& path) {
     if (!v.is_boolean()) throw error(path, "expected true or false, got " + describe(v));
     return v.get<bool>();
 }
 
+inline TraceSpec read_trace(const json& j) {
+    const Object o(j, "trace");
+    static constexpr std::array<std::string_view, 3> keys{"tracer", "max_depth", "fresnel"};
+    o.only(keys);
+    TraceSpec t;
+    if (const json* v = o.find("tracer")) t.tracer = enumeration(*v, o.at("tracer"), tracer_names);
+    if (const json* v = o.find("max_depth")) t.max_depth = int(integer(*v, o.at("max_depth"), 1, 64));
+    if (const json* v = o.find("fresnel")) t.fresnel = boolean(*v, o.at("fresnel"));
+    return t;
+}
+
+// The optimiser keys, one row each: name, how to read it (validating), how to write it.
+// Adding a setting is adding a row (and a field to OptimiseSpec).
 // An integer n or a pair [x, y] of integers in [lo, hi].
 inline std::array<std::int64_t, 2> int_or_pair(const json& v, const std::string& path, std::int64_t lo,
                                                std::int64_t hi) {
@@ -900,6 +908,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     if (s.light.rays > 0) light["rays"] = s.light.rays;
     if (const auto* c = std::get_if<CollimatedLight>(&s.light.shape)) {
         light["direction"] = vec_json(c->direction);
+        if (c->angular_radius > 0) light["angular_radius"] = c->angular_radius;
     } else if (const auto* p = std::get_if<PointLight>(&s.light.shape)) {
         light["position"] = vec_json(p->position);
         // The default axis (towards the surface centre) is written out explicitly.
@@ -962,6 +971,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
                                                                       : json(enum_name(m.material.kind, mesh_material_names))}});
     out["meshes"] = meshes;
     out["trace"] = json{{"tracer", enum_name(s.trace.tracer, tracer_names)}, {"max_depth", s.trace.max_depth}};
+    if (s.trace.fresnel) out["trace"]["fresnel"] = true;
     json opt = json::object();
     for (const auto& k : optimise_keys()) k.write(s.optimise, opt);
     out["optimise"] = opt;

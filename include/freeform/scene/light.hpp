@@ -10,10 +10,16 @@
 
 namespace freeform {
 
-// Parallel light travelling along `direction`, filling the aperture.
+// Light from a source at infinity travelling along `direction`, filling the aperture.
+// `angular_radius` (degrees) is the source's apparent radius: 0 is exactly parallel
+// light; the sun's disc is 0.266 (a half-angle of 4.65 mrad: at 1 m every image point is
+// smeared over a disc of 4.6 mm radius). A disc of uniform radiance: directions are
+// spread uniformly over the cone's solid angle (no limb darkening; see docs/scene.md).
 struct CollimatedLight {
     Vec3d direction{0, 0, -1};
+    double angular_radius = 0;  // degrees, in [0, max_angular_radius]
 };
+inline constexpr double max_angular_radius = 45.0;  // degrees; wider is no longer a distant source
 
 // Isotropic (or profiled) point source. The intensity profile, if given, is a table of
 // (angle from `axis` in degrees, relative intensity), linearly interpolated and zero

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "../core/error.hpp"
@@ -67,6 +68,51 @@ inline std::vector<AperturePoint> stratify_aperture(const Heightmap& s, std::int
     return pts;
 }
 
+// A point of the unit square for the k-th aperture stratum: one of side x side strata,
+// chosen by a fixed scramble of k, jittered inside it. An extended source pairs its own
+// strata with the aperture's this way.
+inline std::pair<double, double> scrambled_stratum(std::size_t k, int side, std::uint64_t scramble_seed,
+                                                   std::uint64_t jitter_seed) {
+    const std::uint64_t g = std::uint64_t(side);
+    const std::uint64_t s = mix64(std::uint64_t(k) ^ mix64(scramble_seed)) % (g * g);
+    CounterRng rng(jitter_seed, std::uint64_t(k));
+    const double a = (double(s % g) + rng.uniform()) / double(g);
+    return {a, (double(s / g) + rng.uniform()) / double(g)};
+}
+
+// Directions of a distant source of angular radius `degrees` around the unit vector
+// `centre` (surface frame): uniform over the cone's solid angle, stratified, and paired
+// with the aperture strata by a fixed scramble (as the disk light pairs its own strata)
+// so that neighbouring aperture points see different parts of the source. With a
+// radius of 0 every direction is `centre`, exactly.
+class ConeSampler {
+public:
+    ConeSampler(Vec3d centre, double degrees, std::uint64_t seed, std::size_t count)
+        : centre_(centre), cos_max_(std::cos(degrees * pi / 180.0)), seed_(seed ^ 0x2545f4914f6cdd1dULL),
+          side_(std::max(1, int(std::lround(std::sqrt(double(count)))))), parallel_(degrees == 0) {
+        // An orthonormal pair across the central direction.
+        const Vec3d helper = std::abs(centre.z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{1, 0, 0};
+        e1_ = normalize(cross(helper, centre));
+        e2_ = cross(centre, e1_);
+    }
+    bool parallel() const { return parallel_; }
+    Vec3d direction(std::size_t k) const {
+        if (parallel_) return centre_;
+        const auto [a, b] = scrambled_stratum(k, side_, seed_, seed_);
+        // Uniform in solid angle over the cap: cos(angle) uniform in [cos_max, 1].
+        const double cos_a = 1.0 - a * (1.0 - cos_max_), sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
+        const double phi = 2 * pi * b;
+        return normalize(cos_a * centre_ + (sin_a * std::cos(phi)) * e1_ + (sin_a * std::sin(phi)) * e2_);
+    }
+
+private:
+    Vec3d centre_, e1_{}, e2_{};
+    double cos_max_;
+    std::uint64_t seed_;
+    int side_;
+    bool parallel_;
+};
+
 inline void finish(RaySet& rays, const std::vector<double>& w) {
     double sum = 0;
     for (double x : w) sum += x;
@@ -103,12 +149,17 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
         const Vec3d d = f.dir_to_local(c->direction / dl);
         if (!(d.z < -1e-9))
             throw InputError("light.direction must point towards the surface's front (against surface.normal)");
-        for (const auto& p : pts) {
-            const double t = top / -d.z;  // from the plane w = top down to w = 0
-            const Vec3d o{p.u - t * d.x, p.v - t * d.y, top};
+        const detail::ConeSampler cone(d, c->angular_radius, seed, pts.size());
+        for (std::size_t k = 0; k < pts.size(); ++k) {
+            const Vec3d dk = cone.direction(k);
+            if (!(dk.z < -1e-9)) continue;  // a wide source's edge grazing or behind the aperture plane
+            const double t = top / -dk.z;  // from the plane w = top down to w = 0
+            const Vec3d o{pts[k].u - t * dk.x, pts[k].v - t * dk.y, top};
             rays.origin.push_back(static_cast<Vec3>(o));
-            rays.direction.push_back(static_cast<Vec3>(d));
-            w.push_back(1.0);
+            rays.direction.push_back(static_cast<Vec3>(dk));
+            // Power through the aperture plane per unit area: the cosine to its normal,
+            // relative to the central direction's (exactly 1 for parallel light).
+            w.push_back(cone.parallel() ? 1.0 : dk.z / d.z);
         }
     } else if (const auto* pl = std::get_if<PointLight>(&light.shape)) {
         const Vec3d pos = f.to_local(pl->position);
@@ -139,9 +190,7 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
         const int g = std::max(1, int(std::lround(std::sqrt(double(n)))));
         for (std::int64_t k = 0; k < n; ++k) {
             const auto& p = pts[std::size_t(k)];
-            const std::uint64_t s = mix64(std::uint64_t(k) ^ mix64(seed)) % std::uint64_t(g * g);
-            CounterRng rng(seed ^ 0x5bd1e995ULL, std::uint64_t(k));
-            const double a = (double(s % g) + rng.uniform()) / g, b = (double(s / g) + rng.uniform()) / g;
+            const auto [a, b] = detail::scrambled_stratum(std::size_t(k), g, seed, seed ^ 0x5bd1e995ULL);
             // Concentric-free polar mapping is enough here: uniform in area.
             const double r = disk.radius * std::sqrt(a), phi = 2 * pi * b;
             const Vec3d o = c + (r * std::cos(phi)) * du + (r * std::sin(phi)) * dv;

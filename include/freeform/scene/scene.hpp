@@ -58,6 +58,8 @@ enum class TracerChoice { automatic, heightfield, embree };
 struct TraceSpec {
     TracerChoice tracer = TracerChoice::automatic;
     int max_depth = 8;  // surface interactions per ray before it is counted as lost
+    // Fresnel losses at refractive faces (PathParams::fresnel; docs/scene.md "trace").
+    bool fresnel = false;
 };
 
 // One level of the multi-level schedule (design/designer.hpp).

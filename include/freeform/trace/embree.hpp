@@ -433,7 +433,7 @@ public:
                 trace_packet(hf, count, [&](int k) { return first + k; }, rec, NoPathVisitor{});
                 for (int k = 0; k < count; ++k) {
                     const Fixed w = r.weight[std::size_t(first + k)];
-                    t.add(rec[k].status, w);
+                    t.add(rec[k], w);
                     deposit_record(params_.receiver, rec[k], w, h.cells);
                 }
             }

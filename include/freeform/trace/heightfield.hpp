@@ -49,7 +49,7 @@ public:
                     packet::trace_rays(hf, g, params_, r.origin.data() + k0, r.direction.data() + k0, n, rec, none);
                     for (int l = 0; l < n; ++l) {
                         const Fixed w = r.weight[std::size_t(k0 + l)];
-                        t.add(rec[l].status, w);
+                        t.add(rec[l], w);
                         deposit_record(params_.receiver, rec[l], w, h.cells);
                     }
                 }
@@ -60,7 +60,7 @@ public:
                 const RayRecord rec = trace_heightfield_ray(hf, params_, r.origin[std::size_t(k)],
                                                             r.direction[std::size_t(k)], NoCellVisitor{});
                 const Fixed w = r.weight[std::size_t(k)];
-                t.add(rec.status, w);
+                t.add(rec, w);
                 deposit_record(params_.receiver, rec, w, h.cells);
             }
         });

@@ -244,7 +244,7 @@ struct TracePart {
                                           // where the last one's end (rays.size() + 1)
     std::vector<CellCrossing> cells;      // their new cell lists, packed
     SparseDelta histogram;                // change of R
-    std::array<Fixed, 6> status_delta{};  // change of weight per RayStatus
+    std::array<Fixed, weight_slots> status_delta{};  // change of weight per slot (RayStatus, Fresnel)
     std::int64_t rays_moved = 0;          // rays whose record changed
     std::int64_t rays_culled = 0;         // rays listed on the move's cells that pass them out of reach
     std::vector<std::uint32_t> ray_mark;  // dedupe of affected rays (generation stamps)
@@ -314,7 +314,7 @@ public:
     const PathParams& params() const { return params_; }
     const std::vector<RayRecord>& records() const { return records_; }
     const RayCellIndex& index() const { return index_; }
-    const std::array<Fixed, 6>& weight_by_status() const { return status_weight_; }
+    const std::array<Fixed, weight_slots>& weight_by_status() const { return status_weight_; }
     int receiver_width() const { return params_.receiver.width; }
     int receiver_height() const { return params_.receiver.height; }
 
@@ -371,7 +371,7 @@ public:
         }
         status_weight_.fill(0);
         for (std::size_t k = 0; k < records_.size(); ++k)
-            status_weight_[std::size_t(records_[k].status)] += rays_->weight[k];
+            account_weight(status_weight_, records_[k], rays_->weight[k]);
         return histogram();
     }
 
@@ -392,7 +392,7 @@ public:
         }
         status_weight_.fill(0);
         for (std::size_t k = 0; k < records_.size(); ++k)
-            status_weight_[std::size_t(records_[k].status)] += rays_->weight[k];
+            account_weight(status_weight_, records_[k], rays_->weight[k]);
         return histogram();
     }
 
@@ -687,8 +687,8 @@ private:
         if (now == before) return;
         ++out.rays_moved;
         const Fixed w = rays_->weight[std::size_t(id)];
-        out.status_delta[std::size_t(before.status)] -= w;
-        out.status_delta[std::size_t(now.status)] += w;
+        account_weight(out.status_delta, before, w, -1);
+        account_weight(out.status_delta, now, w);
         move_deposit(before, now, w, out.histogram);
     }
 
@@ -813,8 +813,8 @@ private:
     // its four bilinear cells: their differences are added once instead of eight times.
     void move_deposit(const RayRecord& before, const RayRecord& now, Fixed w, SparseDelta& d) const {
         const bool was = before.status == RayStatus::receiver, is = now.status == RayStatus::receiver;
-        const Splat a = was ? splat(params_.receiver, before.px, before.py, w) : Splat{};
-        const Splat b = is ? splat(params_.receiver, now.px, now.py, w) : Splat{};
+        const Splat a = was ? splat(params_.receiver, before.px, before.py, delivered_weight(before, w)) : Splat{};
+        const Splat b = is ? splat(params_.receiver, now.px, now.py, delivered_weight(now, w)) : Splat{};
         if (was && is && a.cell[0] == b.cell[0] && a.cell[3] == b.cell[3]) {  // the same four cells
 #pragma GCC unroll 4
             for (int k = 0; k < 4; ++k)
@@ -836,7 +836,7 @@ private:
     PathParams params_;
     std::vector<RayRecord> records_;
     RayCellIndex index_;
-    std::array<Fixed, 6> status_weight_{};
+    std::array<Fixed, weight_slots> status_weight_{};
     std::vector<std::vector<std::size_t>> relisted_;  // commit(): per part, the rays whose cells changed
 };
 

@@ -408,6 +408,7 @@ inline void trace_rays(const View& hf, const hf_detail::Grid& g, const PathParam
         r.depth = std::uint8_t(depth[l]);
         r.px = px[l];
         r.py = py[l];
+        r.transmit = 1.0f;  // mirrors only: no refractive face on the way
     }
 }
 

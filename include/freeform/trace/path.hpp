@@ -4,6 +4,7 @@
 // find the nearest surface hit of a segment; `advance` does the rest. All functions are
 // FREEFORM_HD and work in the surface frame (surface plane w = 0, normal +w).
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 
 #include "../core/deposit.hpp"
@@ -25,17 +26,37 @@ enum class RayStatus : std::uint8_t {
     active = 255,         // still being traced
 };
 
+// Slots of the weight a trace accounts for: one per RayStatus (0..5), and the part of
+// the rays' weight reflected away at refractive faces (Fresnel, PathParams::fresnel).
+inline constexpr std::size_t weight_slots = 7;
+inline constexpr std::size_t fresnel_reflected_slot = 6;
+
 // The outcome of tracing one ray: where it lands on the receiver, in continuous pixel
-// coordinates (px along columns, py along rows from the top), and its status.
+// coordinates (px along columns, py along rows from the top), its status, and the
+// fraction of its weight its faces let through (1 unless Fresnel losses are modelled).
 struct RayRecord {
     float px = 0, py = 0;
     RayStatus status = RayStatus::missed_surface;
     std::uint8_t depth = 0;  // surface interactions
+    float transmit = 1;      // product of the Fresnel transmittances met on the way
 
     friend FREEFORM_HD bool operator==(const RayRecord& a, const RayRecord& b) {
-        return a.px == b.px && a.py == b.py && a.status == b.status && a.depth == b.depth;
+        return a.px == b.px && a.py == b.py && a.status == b.status && a.depth == b.depth &&
+               a.transmit == b.transmit;
     }
 };
+
+// The weight a ray of weight w delivers where it ends (its status's slot); the rest,
+// w - delivered_weight, was reflected away at refractive faces.
+FREEFORM_HD inline Fixed delivered_weight(const RayRecord& r, Fixed w) { return fixed_part(w, r.transmit); }
+
+// Adds ray record r of weight w to per-slot weights (sign -1 takes it away).
+template <class Slots>
+inline void account_weight(Slots& slots, const RayRecord& r, Fixed w, int sign = 1) {
+    const Fixed delivered = delivered_weight(r, w);
+    slots[std::size_t(r.status)] += sign * delivered;
+    if (delivered != w) slots[fresnel_reflected_slot] += sign * (w - delivered);
+}
 
 // The receiver plane in the surface frame.
 struct ReceiverView {
@@ -209,6 +230,7 @@ struct PathState {
     std::int32_t exclude = -1;  // triangle the current segment starts on
     bool inside = false;        // inside the lens body
     float medium = 1;           // index of the refractive mesh solid the ray is in; 1: in air
+    float transmit = 1;         // product of the Fresnel transmittances so far
     std::uint8_t depth = 0;
     RayStatus status = RayStatus::active;
 };
@@ -228,11 +250,29 @@ struct PathParams {
     // Phong shading, with mirror meshes Phong-corrected too; no milled surface has these
     // normals (kept to compare with tools that shade this way).
     bool interpolated_normals = false;
+    // Fresnel losses at refractive faces (the lens's front, back and side faces, and
+    // refractive meshes): each crossing keeps the unpolarised transmittance of the light
+    // that passes; the reflected part is dropped (docs/scene.md says why). false: every
+    // crossing lets all the light through.
+    bool fresnel = false;
 };
 
 namespace path_detail {
 
 inline constexpr float no_exit = 3.0e38f;  // "never", as a distance
+
+// A refractive crossing of direction d at unit normal n from index `from` into `to`:
+// keeps the Fresnel transmittance when the scene models it.
+FREEFORM_HD inline void transmit_through(const PathParams& pp, PathState& s, Vec3 d, Vec3 n, float from, float to) {
+    if (pp.fresnel) s.transmit *= fresnel_transmittance(dot(d, n) / std::sqrt(dot(d, d)), from, to);
+}
+
+// Ends a ray's path with status `status`.
+FREEFORM_HD inline void finish(PathState& s, RayRecord& rec, RayStatus status) {
+    s.status = rec.status = status;
+    rec.depth = s.depth;
+    rec.transmit = s.transmit;
+}
 
 // Distance along one axis from o to the wall at -half or +half that direction d moves
 // towards (no_exit when it moves along neither).
@@ -272,6 +312,7 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
             s.o = s.o + std::fmax(t, 0.0f) * s.d;
             Vec3 out;
             if (refract(s.d, n, m.ior, 1.0f, out)) {
+                transmit_through(pp, s, s.d, n, m.ior, 1.0f);
                 s.d = normalize(out);
                 s.inside = false;
                 s.exclude = -1;
@@ -295,8 +336,7 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
     } else {
         s.status = RayStatus::missed_receiver;
     }
-    rec.status = s.status;
-    rec.depth = s.depth;
+    finish(s, rec, s.status);
     return false;
 }
 
@@ -304,7 +344,7 @@ FREEFORM_HD inline bool end_of_segment(const PathParams& pp, PathState& s, RayRe
 // with. The facet's winding says which side is outside: the ray enters when it travels
 // against the facet normal. Solids sit in air (they do not nest), so leaving goes back
 // to index 1. Total internal reflection is followed: the ray stays inside, reflected.
-FREEFORM_HD inline void refractive_crossing(PathState& s, const SurfaceHit& hit, Vec3 m) {
+FREEFORM_HD inline void refractive_crossing(const PathParams& pp, PathState& s, const SurfaceHit& hit, Vec3 m) {
     const Vec3 facet = cross(hit.p[1] - hit.p[0], hit.p[2] - hit.p[0]);
     const bool entering = dot(s.d, facet) < 0.0f;
     const float from = entering ? s.medium : hit.ior;
@@ -312,6 +352,7 @@ FREEFORM_HD inline void refractive_crossing(PathState& s, const SurfaceHit& hit,
     const Vec3 ns = m * (1.0f / std::sqrt(dot(m, m)));
     Vec3 out;
     if (refract(s.d, ns, from, to, out)) {
+        transmit_through(pp, s, s.d, ns, from, to);
         s.d = normalize(out);
         s.medium = to;
     } else {
@@ -330,13 +371,11 @@ FREEFORM_HD inline void refractive_crossing(PathState& s, const SurfaceHit& hit,
 FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const SurfaceHit& hit, RayRecord& rec) {
     if (hit.kind == HitKind::none) return path_detail::end_of_segment(pp, s, rec);
     if (hit.kind == HitKind::absorber) {
-        s.status = rec.status = RayStatus::absorbed;
-        rec.depth = s.depth;
+        path_detail::finish(s, rec, RayStatus::absorbed);
         return false;
     }
     if (++s.depth > pp.max_depth) {
-        s.status = rec.status = RayStatus::lost_depth;
-        rec.depth = s.depth;
+        path_detail::finish(s, rec, RayStatus::lost_depth);
         return false;
     }
     const Vec3 flat = s.o + hit.t * s.d;
@@ -348,7 +387,7 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
     s.o = phong_point(hit, flat, alpha);
     s.exclude = hit.tri;
     if (hit.kind == HitKind::refractive_mesh) {
-        path_detail::refractive_crossing(s, hit, m);
+        path_detail::refractive_crossing(pp, s, hit, m);
         return true;
     }
     if (hit.kind == HitKind::mirror_mesh || !pp.material.lens) {
@@ -363,10 +402,10 @@ FREEFORM_HD inline bool advance(const PathParams& pp, PathState& s, const Surfac
     const float from = s.inside ? pp.material.ior : 1.0f;
     const float to = s.inside ? 1.0f : pp.material.ior;
     if (!refract(s.d, ns, from, to, out)) {
-        s.status = rec.status = RayStatus::lost_tir;
-        rec.depth = s.depth;
+        path_detail::finish(s, rec, RayStatus::lost_tir);
         return false;
     }
+    path_detail::transmit_through(pp, s, s.d, ns, from, to);
     s.d = normalize(out);
     s.inside = !s.inside;
     return true;

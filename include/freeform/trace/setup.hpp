@@ -39,6 +39,7 @@ inline PathParams make_path_params(const Scene& scene) {
     p.receiver = make_receiver_view(scene.receiver, scene.surface.frame);
     p.phong_alpha = float(scene.surface.phong_alpha);
     p.max_depth = scene.trace.max_depth;
+    p.fresnel = scene.trace.fresnel;
     return p;
 }
 

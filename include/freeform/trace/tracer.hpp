@@ -19,16 +19,21 @@ struct TraceTotals {
     std::int64_t rays = 0;
     std::int64_t rays_hit_receiver = 0;
     Fixed emitted = 0;                 // N: weight reaching the surface aperture
-    std::array<Fixed, 6> weight_by_status{};  // indexed by RayStatus (0..5)
+    // Indexed by RayStatus (0..5); slot fresnel_reflected_slot (6): weight reflected
+    // away at refractive faces when Fresnel losses are modelled.
+    std::array<Fixed, weight_slots> weight_by_status{};
 
     Fixed on_receiver() const { return weight_by_status[0]; }
     Fixed lost_tir() const { return weight_by_status[std::size_t(RayStatus::lost_tir)]; }
+    Fixed fresnel_reflected() const { return weight_by_status[fresnel_reflected_slot]; }
     double energy() const { return emitted > 0 ? double(on_receiver()) / double(emitted) : 0.0; }
 
-    void add(RayStatus s, Fixed w) {
+    // A traced ray of weight w: its status's slot gets what it delivers, the Fresnel slot
+    // what its faces reflected away.
+    void add(const RayRecord& r, Fixed w) {
         ++rays;
-        if (s == RayStatus::receiver) ++rays_hit_receiver;
-        weight_by_status[std::size_t(s)] += w;
+        if (r.status == RayStatus::receiver) ++rays_hit_receiver;
+        account_weight(weight_by_status, r, w);
     }
     void merge(const TraceTotals& o) {
         rays += o.rays;
@@ -61,11 +66,11 @@ struct AddToCells {
     FREEFORM_HD void operator()(std::int64_t c, Fixed a) const { (*cells)[std::size_t(c)] += a; }
 };
 
-// Deposits one record's weight (no-op unless it reached the receiver).
+// Deposits what a record of weight w delivers (no-op unless it reached the receiver).
 template <class Cells>
 inline void deposit_record(const ReceiverView& rv, const RayRecord& r, Fixed w, Cells& cells) {
     if (r.status != RayStatus::receiver) return;
-    deposit(rv, r.px, r.py, w, AddToCells<Cells>{&cells});
+    deposit(rv, r.px, r.py, delivered_weight(r, w), AddToCells<Cells>{&cells});
 }
 
 // Adds up the per-thread histograms and totals of a parallel trace. The sums are exact
