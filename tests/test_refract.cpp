@@ -7,6 +7,7 @@
 #include <cmath>
 #include <vector>
 
+#include <freeform/objective/target.hpp>
 #include <freeform/surface/export.hpp>
 #include <freeform/surface/triangle_mesh.hpp>
 
@@ -162,6 +163,22 @@ TEST_CASE("Fresnel: a flat lens at normal incidence passes (1 - R)^2; the rest i
     // The same footprint, each cell scaled by the transmittance.
     for (std::size_t k = 0; k < on.histogram.cells.size(); ++k)
         CHECK(double(on.histogram.cells[k]) == doctest::Approx(single_pass * double(off.histogram.cells[k])).epsilon(1e-6));
+
+    // A target is scaled to what a flat lens passes: the flat lens meets its own footprint
+    // exactly, instead of being blamed for the 7.8 % its faces must reflect.
+    const RaySet rays = generate_rays(s.light, flat, s.receiver, 1);
+    const PathParams pp = make_path_params(s);
+    CHECK(double(target_total(rays, pp)) == doctest::Approx(single_pass * double(rays.total)).epsilon(1e-6));
+    ImageD footprint(50, 50);
+    for (int y = 0; y < 50; ++y)
+        for (int x = 0; x < 50; ++x) footprint(y, x) = double(off.histogram.cells[std::size_t(y) * 50 + x]);
+    const double fair = l1_error(on.histogram, make_target(footprint, 50, 50, target_total(rays, pp)));
+    const double blamed = l1_error(on.histogram, make_target(footprint, 50, 50, rays.total));
+    MESSAGE("flat Fresnel lens against its own footprint: error ", fair, " (", blamed, " against the unreduced total)");
+    CHECK(fair < 1e-6);
+    CHECK(blamed == doctest::Approx((1 - single_pass) / 2).epsilon(1e-4));
+    s.trace.fresnel = false;
+    CHECK(target_total(rays, make_path_params(s)) == rays.total);
 }
 
 TEST_CASE("Fresnel: a tilted lens face passes T(front) T(back), the two found from the angles") {

@@ -504,7 +504,8 @@ int run_render(const RenderArgs& a) {
         m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
                                            : json("the scene's surface material");
     if (target) {
-        m["error"] = l1_error(r.histogram, make_target(*target, scene.receiver.width, scene.receiver.height, rays.total));
+        m["error"] = l1_error(r.histogram, make_target(*target, scene.receiver.width, scene.receiver.height,
+                                                       target_total(rays, make_path_params(scene))));
         m["error_physical"] = cells->error;
         m["energy_physical"] = cells->totals.energy();
         m["cell_means"] = cell_means_json(*cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
@@ -831,7 +832,7 @@ int run_design(const DesignArgs& a) {
         Render r{generate_rays(scene.light, result.surface, scene.receiver, seed),
                  Histogram(scene.receiver.width, scene.receiver.height), {}, {}};
         HeightfieldTracer(result.surface, r.rays, pp).trace_all(exec::omp_t{options.threads}, r.hist, r.totals);
-        r.scaled = make_target(target, scene.receiver.width, scene.receiver.height, r.rays.total);
+        r.scaled = make_target(target, scene.receiver.width, scene.receiver.height, target_total(r.rays, pp));
         return r;
     };
     const Render fitted = render(options.seed);
@@ -1015,7 +1016,7 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
     render->add_option("--material", ra.material,
                        "what the --mesh is: refractive:IOR (e.g. refractive:1.49) traces it as a closed solid of "
                        "that index (the whole lens, e.g. a design's exported surface.obj, or a lens from another "
-                       "tool; Snell at every crossing, total internal reflection followed, no Fresnel loss), "
+                       "tool; Snell at every crossing, total internal reflection followed, Fresnel losses when the scene asks for them), "
                        "replacing the scene's lens model; the mesh must be closed, consistently oriented and "
                        "outward-facing. Default: the mesh is the surface, with the scene's material");
     render->add_flag("--mesh-normals", ra.mesh_normals,

@@ -16,6 +16,7 @@
 #include "../objective/target.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
+#include "../trace/setup.hpp"
 #include "../trace/tracer.hpp"
 
 namespace freeform {
@@ -50,6 +51,7 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
                                const CellMeanOptions& o, Trace&& trace) {
     Scene s = scene;
     s.receiver.deposit = Deposit::nearest;
+    const PathParams params = make_path_params(s);  // for the target's total (Fresnel)
     s.light.rays = 0;
     s.light.rays_per_cell = target ? o.rays_per_cell : o.max_rays_per_cell;
     CellMeans out;
@@ -63,7 +65,7 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
         trace(static_cast<const Scene&>(s), rays, batch, batch_totals);
         for (std::size_t k = 0; k < batch.cells.size(); ++k) out.histogram.cells[k] += batch.cells[k];
         out.totals.merge(batch_totals);
-        total += rays.total;
+        total += target_total(rays, params);
         out.rays += rays.size();
         ++out.batches;
         out.rays_per_cell = double(out.rays) / double(s.receiver.cells());

@@ -430,7 +430,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
                 options.preprocess_iterations > 0 && options.preprocess_keep > 0) {
                 ProposalSettings all = design_detail::proposals_for(moves, support);
                 const int arms = int(all.bank.size());
-                Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+                Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, target_total(rays, pp)),
                                      weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
                 const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), moves.initial_acceptance,
                                                     timed);
@@ -456,7 +456,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             }
             ProposalSettings ps = design_detail::proposals_for(moves, support, kept_arms);
             const int arms = std::max<int>(1, int(ps.bank.size()));
-            Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, rays.total),
+            Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, target_total(rays, pp)),
                                      weights, penalties, ps,
                                      make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
             const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
@@ -699,7 +699,8 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             const ProposalSettings ps = design_detail::proposals_for(options, 5, kept_arms);
             const PathParams final_pp = make_path_params(final_scene);
             Problem final_state(surface, rays, final_pp,
-                                make_target(target_image, receiver.width, receiver.height, rays.total), weights,
+                                make_target(target_image, receiver.width, receiver.height, target_total(rays, final_pp)),
+                                weights,
                                 penalties, ps, make_bandit("uniform", std::max<int>(1, int(ps.bank.size()))), 1.0,
                                 1.0);
             result.irradiance = final_state.histogram();

@@ -46,7 +46,8 @@ public:
                  const ImageD& target_image, ObjectiveWeights weights, const Penalties& penalties, std::uint64_t seed,
                  int threads)
         : seed_(seed), rays_(generate_rays(light, surface, receiver, seed)), params_(params),
-          image_(make_target(target_image, receiver.width, receiver.height, rays_.total)), weights_(weights),
+          image_(make_target(target_image, receiver.width, receiver.height, target_total(rays_, params))),
+          weights_(weights),
           penalties_(&penalties), threads_(threads) {}
 
     std::int64_t rays() const { return rays_.size(); }
@@ -65,7 +66,7 @@ public:
         TraceTotals totals;
         tracer.trace_all(exec::omp_t{threads_}, h, totals);
         image_.reset(h);
-        return combine(image_.sums(), rays_.total, Penalties::value(penalties_->full(surface), surface), weights_);
+        return combine(image_.sums(), image_.target().total, Penalties::value(penalties_->full(surface), surface), weights_);
     }
 
 private:

@@ -98,7 +98,7 @@ public:
         const Histogram h = backend_.rebuild(trace_);
         image_.reset(h);
         penalty_sum_ = penalties_->full(*surface_);
-        value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
+        value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
         best_is_current_ = true;
         refresh_error_weights();
     }
@@ -158,7 +158,7 @@ public:
         m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
         m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
         const ObjectiveValue after =
-            combine(m.sums, rays_->total, Penalties::value(m.penalty_sum, *surface_), weights_);
+            combine(m.sums, image_.target().total, Penalties::value(m.penalty_sum, *surface_), weights_);
         return m.delta_value = after.total - value_.total;
     }
 
@@ -179,7 +179,7 @@ public:
         trace_.commit(m.change, pool);
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
-        value_ = combine(image_.sums(), rays_->total, Penalties::value(penalty_sum_, *surface_), weights_);
+        value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
     }
 
     void reject(Move& m) {

@@ -39,11 +39,12 @@ struct SurfaceEvaluation {
 inline SurfaceEvaluation evaluate_surface(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
                                           std::uint64_t seed, int threads) {
     const RaySet rays = generate_rays(scene.light, surface, scene.receiver, seed);
-    const HeightfieldTracer tracer(surface, rays, make_path_params(scene));
+    const PathParams pp = make_path_params(scene);
+    const HeightfieldTracer tracer(surface, rays, pp);
     Histogram hist(scene.receiver.width, scene.receiver.height);
     TraceTotals totals;
     tracer.trace_all(exec::omp_t{threads}, hist, totals);
-    const Target t = make_target(target_image, scene.receiver.width, scene.receiver.height, rays.total);
+    const Target t = make_target(target_image, scene.receiver.width, scene.receiver.height, target_total(rays, pp));
     return {l1_error(hist, t), totals.energy()};
 }
 

@@ -2,6 +2,7 @@
 // Builds the kernel-side parameters of a scene (all in the surface frame).
 #include <variant>
 
+#include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "path.hpp"
 
@@ -41,6 +42,26 @@ inline PathParams make_path_params(const Scene& scene) {
     p.max_depth = scene.trace.max_depth;
     p.fresnel = scene.trace.fresnel;
     return p;
+}
+
+// The total a target is scaled to (N of docs/measures.md): the weight of the rays that
+// reach the surface. With Fresnel losses on a lens, the part of it that a flat lens of the
+// same glass lets through, each ray at its own incidence on the front face and, refracted,
+// on the back face (0.9216 of it at normal incidence for n = 1.5). A design is then judged
+// on how it spreads the light its faces can pass, and must send more light where its
+// slopes lose more than a flat face does (docs/scene.md, "Fresnel losses").
+inline Fixed target_total(const RaySet& rays, const PathParams& pp) {
+    if (!pp.fresnel || !pp.material.lens) return rays.total;
+    const float n = pp.material.ior;
+    Fixed total = 0;
+    for (std::size_t k = 0; k < rays.direction.size(); ++k) {
+        const Vec3 d = rays.direction[k];
+        const float cos_front = std::fabs(d.z) / std::sqrt(dot(d, d));
+        const float cos_inside = std::sqrt(std::fmax(0.0f, 1.0f - (1.0f - cos_front * cos_front) / (n * n)));
+        const float pass = fresnel_transmittance(cos_front, 1.0f, n) * fresnel_transmittance(cos_inside, n, 1.0f);
+        total += fixed_part(rays.weight[k], pass);
+    }
+    return total;
 }
 
 }  // namespace freeform
