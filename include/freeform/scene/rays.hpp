@@ -81,24 +81,38 @@ inline std::pair<double, double> scrambled_stratum(std::size_t k, int side, std:
 }
 
 // Directions of a distant source of angular radius `degrees` around the unit vector
-// `centre` (surface frame): uniform over the cone's solid angle, stratified, and paired
-// with the aperture strata by a fixed scramble (as the disk light pairs its own strata)
-// so that neighbouring aperture points see different parts of the source. With a
-// radius of 0 every direction is `centre`, exactly.
+// `centre` (surface frame), uniform over the cone's solid angle. Each aperture point
+// sends `per_point` rays (directions_per_point), one into each of as many equal parts
+// of the disc (two rings of equal solid angle, each cut into per_point / 2 sectors),
+// the pattern turned and jittered from point to point. Every point of the surface thus
+// throws its light over the whole disc, as the sun does: an optimiser cannot steer one
+// ray per point into the cells that one random direction happens to favour (with one
+// direction per point, designs fitted that noise: held-out 0.072 against fitted 0.050
+// on the sunlit lens). With a radius of 0 every direction is `centre`, exactly.
 class ConeSampler {
 public:
-    ConeSampler(Vec3d centre, double degrees, std::uint64_t seed, std::size_t count)
+    static constexpr int directions_per_point = 8;
+
+    ConeSampler(Vec3d centre, double degrees, std::uint64_t seed)
         : centre_(centre), cos_max_(std::cos(degrees * pi / 180.0)), seed_(seed ^ 0x2545f4914f6cdd1dULL),
-          side_(std::max(1, int(std::lround(std::sqrt(double(count)))))), parallel_(degrees == 0) {
+          parallel_(degrees == 0) {
         // An orthonormal pair across the central direction.
         const Vec3d helper = std::abs(centre.z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{1, 0, 0};
         e1_ = normalize(cross(helper, centre));
         e2_ = cross(centre, e1_);
     }
     bool parallel() const { return parallel_; }
-    Vec3d direction(std::size_t k) const {
+    int per_point() const { return parallel_ ? 1 : directions_per_point; }
+    // Direction m (< per_point()) of aperture point q.
+    Vec3d direction(std::size_t q, int m) const {
         if (parallel_) return centre_;
-        const auto [a, b] = scrambled_stratum(k, side_, seed_, seed_);
+        constexpr int sectors = directions_per_point / 2;
+        CounterRng turn(seed_, std::uint64_t(q));
+        const double offset = turn.uniform();
+        CounterRng jitter(seed_ ^ 0x9e3779b97f4a7c15ULL, std::uint64_t(q) * directions_per_point + std::uint64_t(m));
+        const double a = (double(m % 2) + jitter.uniform()) / 2.0;
+        double b = (double(m / 2) + jitter.uniform()) / sectors + offset;
+        b -= std::floor(b);
         // Uniform in solid angle over the cap: cos(angle) uniform in [cos_max, 1].
         const double cos_a = 1.0 - a * (1.0 - cos_max_), sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
         const double phi = 2 * pi * b;
@@ -109,7 +123,6 @@ private:
     Vec3d centre_, e1_{}, e2_{};
     double cos_max_;
     std::uint64_t seed_;
-    int side_;
     bool parallel_;
 };
 
@@ -134,7 +147,10 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
     const std::int64_t count = ray_budget(light, receiver);
     const Frame& f = surface.frame();
     double dA = 0;
-    const auto pts = detail::stratify_aperture(surface, count, seed, dA);
+    // A source of finite angular size sends several rays from each aperture point.
+    const auto* collimated = std::get_if<CollimatedLight>(&light.shape);
+    const int per_point = collimated && collimated->angular_radius > 0 ? detail::ConeSampler::directions_per_point : 1;
+    const auto pts = detail::stratify_aperture(surface, std::max<std::int64_t>(1, count / per_point), seed, dA);
     RaySet rays;
     rays.origin.reserve(pts.size());
     rays.direction.reserve(pts.size());
@@ -143,24 +159,25 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
     // Rays start just above the slab so that the whole path through it is traced.
     const double top = double(surface.h_max()) + 1e-6 * std::max(surface.size().x, surface.size().y);
 
-    if (const auto* c = std::get_if<CollimatedLight>(&light.shape)) {
+    if (const auto* c = collimated) {
         const double dl = length(c->direction);
         if (!(dl > 0) || !std::isfinite(dl)) throw InputError("light.direction must be a finite non-zero vector");
         const Vec3d d = f.dir_to_local(c->direction / dl);
         if (!(d.z < -1e-9))
             throw InputError("light.direction must point towards the surface's front (against surface.normal)");
-        const detail::ConeSampler cone(d, c->angular_radius, seed, pts.size());
-        for (std::size_t k = 0; k < pts.size(); ++k) {
-            const Vec3d dk = cone.direction(k);
-            if (!(dk.z < -1e-9)) continue;  // a wide source's edge grazing or behind the aperture plane
-            const double t = top / -dk.z;  // from the plane w = top down to w = 0
-            const Vec3d o{pts[k].u - t * dk.x, pts[k].v - t * dk.y, top};
-            rays.origin.push_back(static_cast<Vec3>(o));
-            rays.direction.push_back(static_cast<Vec3>(dk));
-            // Power through the aperture plane per unit area: the cosine to its normal,
-            // relative to the central direction's (exactly 1 for parallel light).
-            w.push_back(cone.parallel() ? 1.0 : dk.z / d.z);
-        }
+        const detail::ConeSampler cone(d, c->angular_radius, seed);
+        for (std::size_t q = 0; q < pts.size(); ++q)
+            for (int m = 0; m < cone.per_point(); ++m) {
+                const Vec3d dk = cone.direction(q, m);
+                if (!(dk.z < -1e-9)) continue;  // a wide source's edge grazing or behind the aperture plane
+                const double t = top / -dk.z;  // from the plane w = top down to w = 0
+                const Vec3d o{pts[q].u - t * dk.x, pts[q].v - t * dk.y, top};
+                rays.origin.push_back(static_cast<Vec3>(o));
+                rays.direction.push_back(static_cast<Vec3>(dk));
+                // Power through the aperture plane per unit area: the cosine to its normal,
+                // relative to the central direction's (exactly 1 for parallel light).
+                w.push_back(cone.parallel() ? 1.0 : dk.z / d.z);
+            }
     } else if (const auto* pl = std::get_if<PointLight>(&light.shape)) {
         const Vec3d pos = f.to_local(pl->position);
         if (!(pos.z > top)) throw InputError("light.position must lie in front of the surface, above its height bounds");
