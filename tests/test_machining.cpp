@@ -11,6 +11,8 @@
 
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/machining.hpp>
+#include <freeform/objective/penalty.hpp>
+#include <freeform/surface/tool.hpp>
 #include <freeform/design/start.hpp>
 #include <freeform/surface/export.hpp>
 
@@ -148,4 +150,48 @@ TEST_CASE("machining report on a design's start surface agrees with quadratic fi
                                                  << " mm (5 x 5 fits)");
     CHECK(*r.min_concave_radius == doctest::Approx(independent).epsilon(1e-6));
     CHECK(independent_min_concave_radius(start.surface, 1) > *r.min_concave_radius);
+}
+
+TEST_CASE("the ball-end mill: a bowl it fits is left alone; a V-groove is filled with the ball's round") {
+    Scene scene = testing::basic_scene();
+    {
+        // A spherical bowl of radius 4 r over the whole part: the ball reaches everywhere.
+        const double r = 0.02, R = 4 * r;
+        Heightmap bowl = shaped(101, [&](double u, double v) { return R - std::sqrt(R * R - u * u - v * v); });
+        const Heightmap before = bowl;
+        CHECK(cut_with_ball(bowl, r) == 0.0);
+        double moved = 0;
+        for (int j = 0; j < 101; ++j)
+            for (int i = 0; i < 101; ++i) moved = std::max(moved, std::abs(double(bowl(i, j)) - double(before(i, j))));
+        CHECK(moved == 0.0);
+        CHECK(ToolRadiusTerm{r}.cost(HeightsView(bowl), 50, 50) == 0.0);
+        // A tool of radius 4 R meets a curvature four times what it can cut: shortfall 3.
+        CHECK(ToolRadiusTerm{4 * R}.cost(HeightsView(bowl), 50, 50) == doctest::Approx(9.0).epsilon(0.02));
+    }
+    const double r = 0.005;
+
+    // A V-groove along v with flanks of slope s: the ball touches both flanks at
+    // |u| = r s / sqrt(1 + s^2), and its bottom sits r (sqrt(1 + s^2) - 1) above the groove.
+    const double s = 0.5;
+    Heightmap groove = shaped(201, [&](double u, double) { return s * std::abs(u); });
+    const Heightmap sharp = groove;
+    const double added = cut_with_ball(groove, r);
+    const double du = 0.1 / 200, touch = r * s / std::sqrt(1 + s * s);
+    CHECK(added == doctest::Approx(r * (std::sqrt(1 + s * s) - 1)).epsilon(0.01));
+    for (int i = 0; i < 201; ++i) {
+        const double u = groove.u_of(i), g = groove(i, 100), h = sharp(i, 100);
+        CHECK(g >= h);
+        if (std::abs(u) > r + du) CHECK(g == h);  // out of the ball's reach of the groove: untouched
+        // Between the contact points and r, balls centred on vertices leave scallops.
+        if (std::abs(u) > touch + du) CHECK(g - h < 1e-5);
+        // Inside, the ball's own round: a circle of radius r about its centre.
+        if (std::abs(u) < touch - du)
+            CHECK(g == doctest::Approx(r * std::sqrt(1 + s * s) - std::sqrt(r * r - u * u)).epsilon(1e-3));
+    }
+    // The machinist's report now finds no radius under the tool's (central differences).
+    const MachiningReport rep = machining_report(scene, groove, tessellate_surface(groove, 0.0f, 1));
+    REQUIRE(rep.min_concave_radius.has_value());
+    CHECK(*rep.min_concave_radius >= 0.95 * r);
+    // A second cut changes nothing.
+    CHECK(cut_with_ball(groove, r) < 1e-7);
 }

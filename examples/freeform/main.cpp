@@ -585,6 +585,7 @@ ExportEvaluation evaluate_export(const Scene& scene, const Heightmap& surface, c
 #endif
     m["export"] = exported;
     m["fabrication"] = fabrication_json(machining_report(scene, surface, fabrication.mesh));
+    if (scene.surface.tool_radius > 0) m["fabrication"]["tool_radius"] = scene.surface.tool_radius;
     return ev;
 }
 
@@ -817,6 +818,9 @@ int run_design(const DesignArgs& a) {
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
+    // The tool's cut last of all: every figure below describes what the mill leaves.
+    if (scene.surface.tool_radius > 0)
+        result.tool_cut = std::max(result.tool_cut, cut_with_ball(result.surface, scene.surface.tool_radius));
 
     // Final evaluation at the scene's full resolution, with the scene's seed (the rays the
     // design was fitted to) and, unless the checks are off, with the held-out rays of the
@@ -856,6 +860,7 @@ int run_design(const DesignArgs& a) {
     m["objective"] = result.value.total;
     if (result.held_out.total >= 0) m["objective_held_out"] = result.held_out.total;
     m["iterations"] = result.iterations;
+    if (scene.surface.tool_radius > 0) m["tool_cut_max_added"] = result.tool_cut;  // metres of material the cutter left
     m["accepted"] = result.accepted;
     m["seconds"] = result.seconds;
     m["iterations_per_second"] = result.seconds > 0 ? double(result.iterations) / result.seconds : 0.0;

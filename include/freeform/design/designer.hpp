@@ -26,6 +26,7 @@
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/refine.hpp"
+#include "../surface/tool.hpp"
 #include "../trace/setup.hpp"
 #include "held_out.hpp"
 #include "problem.hpp"
@@ -83,6 +84,7 @@ struct DesignResult {
     std::int64_t iterations = 0;
     std::int64_t accepted = 0;
     double seconds = 0;
+    double tool_cut = 0;       // surface.tool_radius: the most height the tool's cut added (metres)
     bool stopped_early = false;  // a callback stopped it (e.g. Ctrl-C): the best so far is kept
     std::vector<StageReport> stages;
     std::vector<ConvergencePoint> convergence;
@@ -236,13 +238,20 @@ inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const Im
     return shared;
 }
 
-// The penalty terms the options ask for; add terms of your own to it and pass it to
-// design() (objective/penalty.hpp: any type modelling LocalHeightTerm).
-inline Penalties default_penalties(const DesignOptions& o) {
+// The weight of the tool-radius term when the surface has a tool_radius: a vertex whose
+// concave curvature is twice what the tool can cut costs as much as an error of 1 in the
+// mean over the grid divided by the vertex count, i.e. a few such vertices matter.
+inline constexpr double tool_radius_weight = 1.0;
+
+// The penalty terms the options ask for, and the milling tool's when `tool_radius` > 0
+// (surface.tool_radius); add terms of your own to it and pass it to design()
+// (objective/penalty.hpp: any type modelling LocalHeightTerm).
+inline Penalties default_penalties(const DesignOptions& o, double tool_radius = 0) {
     Penalties p;
     p.add(HeightBoundTerm{}, o.height_bound_weight);
     p.add(ValleyTerm{o.valley_min_angle}, o.valley_weight);
     p.add(SmoothnessTerm{}, o.smoothness_weight);
+    if (tool_radius > 0) p.add(ToolRadiusTerm{tool_radius}, tool_radius_weight);
     return p;
 }
 
@@ -716,6 +725,10 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
             }
         }
     }
+    // The milling tool's constraint, made exact: what a ball of the tool's radius leaves
+    // (result.irradiance and value describe the surface before this cut; the CLI traces
+    // the cut surface again for every figure it reports).
+    if (scene.surface.tool_radius > 0) result.tool_cut = cut_with_ball(surface, scene.surface.tool_radius);
     result.surface = std::move(surface);
     result.iterations = total_iterations;
     result.seconds = elapsed();
@@ -755,7 +768,7 @@ template <class Callback>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback) {
     return design(scene, std::move(initial), target_image, options, std::forward<Callback>(callback),
-                  default_penalties(options));
+                  default_penalties(options, scene.surface.tool_radius));
 }
 
 }  // namespace freeform

@@ -33,6 +33,7 @@
 #include "../core/math.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
+#include "../surface/tool.hpp"
 #include "../surface/triangle_mesh.hpp"
 
 namespace freeform {
@@ -48,33 +49,6 @@ struct MachiningReport {
     double sag_range() const { return sag_max - sag_min; }
 };
 
-namespace detail {
-
-// Largest principal curvature (seen from +normal) at interior vertex (i, j), and the
-// slope there (radians).
-struct VertexShape {
-    double kappa_max;
-    double slope;
-};
-
-inline VertexShape vertex_shape(const Heightmap& h, int i, int j) {
-    const double du = h.size().x / (h.nx() - 1), dv = h.size().y / (h.ny() - 1);
-    const double c = h(i, j);
-    const double hu = (h(i + 1, j) - h(i - 1, j)) / (2 * du);
-    const double hv = (h(i, j + 1) - h(i, j - 1)) / (2 * dv);
-    const double huu = (h(i + 1, j) - 2 * c + h(i - 1, j)) / (du * du);
-    const double hvv = (h(i, j + 1) - 2 * c + h(i, j - 1)) / (dv * dv);
-    const double huv = (h(i + 1, j + 1) - h(i + 1, j - 1) - h(i - 1, j + 1) + h(i - 1, j - 1)) / (4 * du * dv);
-    const double E = 1 + hu * hu, F = hu * hv, G = 1 + hv * hv;
-    const double W = std::sqrt(1 + hu * hu + hv * hv);
-    const double L = huu / W, M = huv / W, N = hvv / W;
-    const double det_i = E * G - F * F;
-    const double H = (E * N - 2 * F * M + G * L) / (2 * det_i);
-    const double K = (L * N - M * M) / det_i;
-    return {H + std::sqrt(std::max(0.0, H * H - K)), std::atan(std::sqrt(hu * hu + hv * hv))};
-}
-
-}  // namespace detail
 
 // The report for a design's surface and the part exported from it (fabrication.hpp).
 inline MachiningReport machining_report(const Scene& scene, const Heightmap& surface, const TriangleMesh& exported) {
@@ -96,7 +70,8 @@ inline MachiningReport machining_report(const Scene& scene, const Heightmap& sur
             if (!(surface.cell_active(i - 1, j - 1) && surface.cell_active(i, j - 1) &&
                   surface.cell_active(i - 1, j) && surface.cell_active(i, j)))
                 continue;
-            const detail::VertexShape s = detail::vertex_shape(surface, i, j);
+            const VertexCurvature s = vertex_curvature(surface, i, j, surface.size().x / (surface.nx() - 1),
+                                                       surface.size().y / (surface.ny() - 1));
             r.max_slope_degrees = std::max(r.max_slope_degrees, s.slope * 180.0 / pi);
             if (s.kappa_max > kappa) {
                 kappa = s.kappa_max;

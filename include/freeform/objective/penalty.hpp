@@ -24,6 +24,7 @@
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../surface/overlay.hpp"
+#include "../surface/tool.hpp"
 
 namespace freeform {
 
@@ -89,6 +90,21 @@ struct ValleyTerm {
         if (i > 0 && i + 1 < h.nx()) along(h(i - 1, j), h(i, j), h(i + 1, j), h.du());
         if (j > 0 && j + 1 < h.ny()) along(h(i, j - 1), h(i, j), h(i, j + 1), h.dv());
         return c;
+    }
+};
+
+// A ball-end mill of radius `tool_radius` (metres) cannot cut a valley whose radius of
+// curvature, seen from the front, is smaller: the cost is the squared shortfall of
+// k_max * tool_radius above 1 (k_max the largest principal curvature at the vertex). It
+// steers the annealer; cut_with_ball (surface/tool.hpp) makes the final surface obey.
+struct ToolRadiusTerm {
+    double tool_radius = 0.005;
+    std::string_view name() const { return "tool_radius"; }
+    int radius() const { return 1; }
+    double cost(const HeightsView& h, int i, int j) const {
+        if (i == 0 || j == 0 || i + 1 == h.nx() || j + 1 == h.ny()) return 0.0;
+        const double over = vertex_curvature(h, i, j, h.du(), h.dv()).kappa_max * tool_radius - 1.0;
+        return over > 0 ? over * over : 0.0;
     }
 };
 

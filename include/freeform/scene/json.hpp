@@ -326,8 +326,9 @@ inline constexpr std::array<EnumName<int>, 3> light_type_names{{{"collimated", 0
 
 inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base) {
     const Object o(j, "surface");
-    static constexpr std::array<std::string_view, 10> keys{
-        "center", "normal", "up", "size", "mesh", "height_bounds", "aperture", "material", "phong_alpha", "initial"};
+    static constexpr std::array<std::string_view, 11> keys{"center",   "normal",      "up",     "size",
+                                                           "mesh",     "height_bounds", "aperture", "material",
+                                                           "phong_alpha", "initial",    "tool_radius"};
     o.only(keys);
     SurfaceSpec s;
     s.frame = read_frame(o, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
@@ -377,6 +378,7 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
         }
     }
     if (const json* v = o.find("phong_alpha")) s.phong_alpha = number_in(*v, o.at("phong_alpha"), 0, 1);
+    if (const json* v = o.find("tool_radius")) s.tool_radius = number_in(*v, o.at("tool_radius"), 0, 1);
     if (const json* v = o.find("initial")) {
         const std::string p = o.at("initial");
         const char* expected =
@@ -942,6 +944,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     else
         surface["material"] = "mirror";
     surface["phong_alpha"] = sf.phong_alpha;
+    if (sf.tool_radius > 0) surface["tool_radius"] = sf.tool_radius;
     if (!sf.initial_pfm.empty())
         surface["initial"] = sf.initial_pfm.string();
     else if (sf.initial_paraboloid)

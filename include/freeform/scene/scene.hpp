@@ -34,6 +34,10 @@ struct SurfaceSpec {
     // height field exactly from its vertices and central-difference normals (the edge
     // offset is 2α·c·t(1−t)L² against the parabola's c·t(1−t)L²): README "What gets milled".
     double phong_alpha = 0.5;
+    // Radius (metres) of the ball-end mill that will cut the surface; 0: no constraint.
+    // The design keeps every concave radius (seen from the front) at least this large
+    // (surface/tool.hpp; docs/scene.md).
+    double tool_radius = 0;
     // Initial shape: a PFM heightmap, a paraboloid, or else `initial_shape`.
     InitialShape initial_shape = InitialShape::automatic;
     std::filesystem::path initial_pfm;
