@@ -11,7 +11,9 @@
 
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/machining.hpp>
+#include <freeform/design/designer.hpp>
 #include <freeform/objective/penalty.hpp>
+#include <freeform/scene/json.hpp>
 #include <freeform/surface/tool.hpp>
 #include <freeform/design/start.hpp>
 #include <freeform/surface/export.hpp>
@@ -194,4 +196,20 @@ TEST_CASE("the ball-end mill: a bowl it fits is left alone; a V-groove is filled
     CHECK(*rep.min_concave_radius >= 0.95 * r);
     // A second cut changes nothing.
     CHECK(cut_with_ball(groove, r) < 1e-7);
+}
+
+TEST_CASE("scene file: surface.tool_radius") {
+    const auto parse = [](const std::string& surface) {
+        return scene_from_json(nlohmann::json::parse(R"({"light": {"type": "collimated"}, "surface": )" + surface +
+                                                     R"(, "receiver": {}})"));
+    };
+    const Scene s = parse(R"({"tool_radius": 0.005})");
+    CHECK(s.surface.tool_radius == 0.005);
+    CHECK(scene_to_json(s)["surface"]["tool_radius"] == 0.005);
+    CHECK(!scene_to_json(parse("{}"))["surface"].contains("tool_radius"));  // 0: no key, as before
+    CHECK_THROWS_WITH_AS(parse(R"({"tool_radius": -0.001})"), doctest::Contains("surface.tool_radius"), InputError);
+    // The designer's default terms include the tool's exactly when there is one.
+    const DesignOptions o;
+    CHECK(default_penalties(o, 0.005).names().back() == "tool_radius");
+    CHECK(default_penalties(o).names().size() + 1 == default_penalties(o, 0.005).names().size());
 }
