@@ -49,17 +49,45 @@ def read_pfm(path):
     return np.flipud(img)
 
 
+def plot(out, work, runs):
+    def e(name, judge):
+        return runs["renders"]["%s / %s" % (name, judge)]["error_physical"]
+
+    tag = {"under the sun": "sun", "under parallel light": "parallel"}
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        panels = [("parallel", "under parallel light"), ("parallel", "under the sun"), ("sun", "under the sun")]
+        fig, axes = plt.subplots(1, 3, figsize=(12, 4.4))
+        for ax, (name, judge) in zip(axes, panels):
+            img = read_pfm(os.path.join(work, "render-%s-%s" % (name, tag[judge]), "irradiance.pfm"))
+            ax.imshow(img, cmap="inferno")
+            ax.set_title("made for %s\n%s: %.3f" % ("parallel light" if name == "parallel" else "the sun", judge,
+                                                   e(name, judge)), fontsize=10)
+            ax.axis("off")
+        fig.tight_layout(rect=(0, 0, 1, 0.97))
+        fig.savefig(os.path.join(out, "irradiance.png"), dpi=90)
+    except ImportError:
+        print("sunlight.py: matplotlib missing, no irradiance.png", file=sys.stderr)
+
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--budget", type=float, default=60)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--freeform", default=os.path.join(ROOT, "build", "release", "bin", "freeform"))
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "sunlight"))
+    ap.add_argument("--plot-only", action="store_true", help="redraw irradiance.png from OUT/runs.json and OUT/work")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     work = os.path.join(args.out, "work")
     os.makedirs(work, exist_ok=True)
 
+    if args.plot_only:
+        plot(args.out, work, json.load(open(os.path.join(args.out, "runs.json"))))
+        return
     base = json.load(open(os.path.join(ROOT, "examples", "scenes", "sunlit-lens.json")))
 
     def variant(name, angular_radius, fresnel):
@@ -139,23 +167,7 @@ def main():
     open(os.path.join(args.out, "table.md"), "w").write("\n".join(lines))
     print("\n".join(lines))
 
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        panels = [("parallel", "under parallel light"), ("parallel", "under the sun"), ("sun", "under the sun")]
-        fig, axes = plt.subplots(1, 3, figsize=(12, 4.4))
-        for ax, (name, judge) in zip(axes, panels):
-            img = read_pfm(os.path.join(work, "render-%s-%s" % (name, tag[judge]), "irradiance.pfm"))
-            ax.imshow(img, cmap="inferno")
-            ax.set_title("made for %s\n%s: %.3f" % ("parallel light" if name == "parallel" else "the sun", judge,
-                                                   e(name, judge)), fontsize=10)
-            ax.axis("off")
-        fig.tight_layout()
-        fig.savefig(os.path.join(args.out, "irradiance.png"), dpi=90)
-    except ImportError:
-        print("sunlight.py: matplotlib missing, no irradiance.png", file=sys.stderr)
-
+    plot(args.out, work, runs)
 
 if __name__ == "__main__":
     main()
