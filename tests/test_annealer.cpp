@@ -7,9 +7,11 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -337,6 +339,49 @@ TEST_CASE("the trajectory is the same for every speculative window and thread co
         freeform::anneal(other, o);
         CHECK(other.accepted != a.problem.accepted);
     }
+}
+
+namespace {
+
+// A problem whose delta() must not run twice at once (as the Embree backend's, which
+// shows a move to shared state to evaluate it): it counts the deltas in flight and
+// records the most it ever saw. Each delta waits a little, so that two running at
+// once would overlap.
+struct OneAtATime : Rastrigin {
+    static constexpr bool concurrent_deltas = false;
+    std::shared_ptr<std::atomic<int>> in_flight = std::make_shared<std::atomic<int>>(0);
+    std::shared_ptr<std::atomic<int>> most = std::make_shared<std::atomic<int>>(0);
+    explicit OneAtATime(std::uint64_t start) : Rastrigin(start) {}
+    double delta(const Move& m) const {
+        const int now = ++*in_flight;
+        int seen = most->load();
+        while (now > seen && !most->compare_exchange_weak(seen, now)) {
+        }
+        volatile double spin = 0;
+        for (int k = 0; k < 2000; ++k) spin = spin + std::sqrt(double(k));
+        --*in_flight;
+        return Rastrigin::delta(m);
+    }
+};
+
+struct Overlapping : OneAtATime {
+    static constexpr bool concurrent_deltas = true;
+    using OneAtATime::OneAtATime;
+};
+
+}  // namespace
+
+TEST_CASE("a problem that cannot evaluate deltas concurrently gets them one at a time, same trajectory") {
+    static_assert(!freeform::anneal_detail::concurrent_deltas_of<OneAtATime>());
+    static_assert(freeform::anneal_detail::concurrent_deltas_of<Rastrigin>());
+    const auto serial = trajectory_run(OneAtATime(3), 1, 1, 3000);
+    const auto windows = trajectory_run(OneAtATime(3), 4, 2, 3000);
+    check_same_trajectory(serial, windows);
+    CHECK(windows.result.proposals_evaluated > windows.result.iterations);  // speculation ran
+    CHECK(*windows.problem.most == 1);
+    // The same problem allowed to overlap does (the check above could fail).
+    const auto parallel = trajectory_run(Overlapping(3), 4, 2, 3000);
+    MESSAGE("most deltas in flight at once, concurrent problem: ", parallel.problem.most->load());
 }
 
 TEST_CASE("max_iterations stops exactly") {

@@ -366,6 +366,19 @@ inline constexpr std::int64_t never = std::numeric_limits<std::int64_t>::max();
 
 inline bool target_enabled(double target) { return !std::isnan(target) && target >= 0; }
 
+// Whether a problem's delta() may run on several moves at once: true unless the problem
+// says otherwise with `static constexpr bool concurrent_deltas = false` (a backend that
+// must show a move to shared state to evaluate it, as the Embree one does). Speculative
+// windows of such a problem evaluate their proposals one after another: the trajectory
+// is the same, only the speed differs.
+template <class Problem>
+constexpr bool concurrent_deltas_of() {
+    if constexpr (requires { Problem::concurrent_deltas; })
+        return Problem::concurrent_deltas;
+    else
+        return true;
+}
+
 // One run of the annealer: the loop state and the steps of the loop.
 template <class Problem, class Schedule>
 class AnnealRun {
@@ -558,7 +571,7 @@ private:
                 return;
             }
         }
-        if (count == 1 || options_.threads == 1) {
+        if (count == 1 || options_.threads == 1 || !concurrent_deltas_of<Problem>()) {
             for (int k = 0; k < count; ++k) deltas_[k] = static_cast<double>(cp.delta(moves_[k]));
             return;
         }

@@ -65,6 +65,9 @@ struct FullRetraceBackend {
 template <class Backend = HeightfieldBackend>
 class BasicReflectorProblem {
 public:
+    // Deltas may run concurrently only when the backend allows it (anneal/annealer.hpp).
+    static constexpr bool concurrent_deltas = Backend::concurrent_deltas;
+
     struct Move {
         HeightOverlay overlay;
         TraceChange change;
