@@ -162,11 +162,20 @@ struct SyncCounter {
     }
 };
 
+// Throws from the delta of its third proposal; counts the deltas computed.
 struct ThrowingProblem {
-    struct Move {};
+    struct Move {
+        int id = 0;
+    };
+    int proposed = 0;
+    std::shared_ptr<std::atomic<int>> deltas = std::make_shared<std::atomic<int>>(0);
     double energy() const { return 1.0; }
-    void propose(CounterRng&, double, Move&) {}
-    double delta(const Move&) const { throw std::runtime_error("delta failed"); }
+    void propose(CounterRng&, double, Move& m) { m.id = proposed++; }
+    double delta(const Move& m) const {
+        ++*deltas;
+        if (m.id == 2) throw std::runtime_error("delta failed");
+        return 1.0;
+    }
     void accept(const Move&) {}
     void reject(const Move&) {}
 };
@@ -641,12 +650,17 @@ TEST_CASE("the linear schedule") {
 
 TEST_CASE("an exception from delta() reaches the caller, also from a parallel window") {
     for (int speculative : {1, 4}) {
+        CAPTURE(speculative);
         AnnealOptions o;
         o.max_iterations = 10;
         o.speculative = speculative;
         o.threads = 2;
+        o.adaptive_speculation = false;  // windows of 4 from the first iteration
         ThrowingProblem p;
-        CHECK_THROWS_AS(freeform::anneal(p, o), std::runtime_error);
+        CHECK_THROWS_WITH_AS(freeform::anneal(p, o), "delta failed", std::runtime_error);
+        // Serial: proposals 0, 1 and the throwing 2. A parallel window of 4 evaluates all
+        // four on the pool's threads before the first error (in proposal order) is rethrown.
+        CHECK(p.deltas->load() == (speculative == 1 ? 3 : 4));
     }
 }
 
