@@ -609,8 +609,6 @@ inline TraceSpec read_trace(const json& j) {
     return t;
 }
 
-// The optimiser keys, one row each: name, how to read it (validating), how to write it.
-// Adding a setting is adding a row (and a field to OptimiseSpec).
 // An integer n or a pair [x, y] of integers in [lo, hi].
 inline std::array<std::int64_t, 2> int_or_pair(const json& v, const std::string& path, std::int64_t lo,
                                                std::int64_t hi) {
@@ -664,6 +662,8 @@ inline json levels_json(const std::vector<LevelPlan>& levels) {
     return out;
 }
 
+// The optimiser keys, one row each: name, how to read it (validating), how to write it.
+// Adding a setting is adding a row (and a field to OptimiseSpec).
 struct OptimiseKey {
     std::string_view name;
     void (*read)(const json& v, const std::string& path, OptimiseSpec& o);

@@ -92,6 +92,8 @@ inline std::pair<double, double> scrambled_stratum(std::size_t k, int side, std:
 class ConeSampler {
 public:
     static constexpr int directions_per_point = 8;
+    // Rays per aperture point for a source of this angular radius.
+    static int rays_per_point(double degrees) { return degrees == 0 ? 1 : directions_per_point; }
 
     ConeSampler(Vec3d centre, double degrees, std::uint64_t seed)
         : centre_(centre), cos_max_(std::cos(degrees * pi / 180.0)), seed_(seed ^ 0x2545f4914f6cdd1dULL),
@@ -149,7 +151,7 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
     double dA = 0;
     // A source of finite angular size sends several rays from each aperture point.
     const auto* collimated = std::get_if<CollimatedLight>(&light.shape);
-    const int per_point = collimated && collimated->angular_radius > 0 ? detail::ConeSampler::directions_per_point : 1;
+    const int per_point = collimated ? detail::ConeSampler::rays_per_point(collimated->angular_radius) : 1;
     const auto pts = detail::stratify_aperture(surface, std::max<std::int64_t>(1, count / per_point), seed, dA);
     RaySet rays;
     rays.origin.reserve(pts.size());

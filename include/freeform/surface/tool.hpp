@@ -82,39 +82,36 @@ inline double cut_with_ball(Heightmap& surface, double radius) {
         for (int i = 1; i + 1 < nx; ++i)
             if (vertex_curvature(surface, i, j, du, dv).kappa_max * radius > 1.0) tight[std::size_t(j) * nx + i] = 1, any = true;
     if (!any) return 0;
-    for (int j = 0; j < ny; ++j)
-        for (int i = 0; i < nx; ++i) {
-            if (!tight[std::size_t(j) * nx + i]) continue;
-            for (const Offset& o : ball) {
-                const int y = i + o.a, x = j + o.b;
-                if (y >= 0 && y < nx && x >= 0 && x < ny) reach[std::size_t(x) * nx + y] = 1;
-            }
+    // Calls visit(i2, j2) for every vertex of the grid within the ball's reach of (i, j).
+    const auto around = [&](int i, int j, auto&& visit) {
+        for (const Offset& o : ball) {
+            const int i2 = i + o.a, j2 = j + o.b;
+            if (i2 >= 0 && i2 < nx && j2 >= 0 && j2 < ny) visit(i2, j2, o.rise);
         }
-    std::vector<double> h(std::size_t(nx) * ny), z(h.size()), g(h.size());
+    };
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i)
+            if (tight[std::size_t(j) * nx + i]) around(i, j, [&](int i2, int j2, double) { reach[std::size_t(j2) * nx + i2] = 1; });
+    std::vector<double> h(std::size_t(nx) * ny), z(h.size());
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) h[std::size_t(j) * nx + i] = surface(i, j);
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
             double top = -std::numeric_limits<double>::infinity();
-            for (const Offset& o : ball) {
-                const int y = i + o.a, x = j + o.b;
-                if (y >= 0 && y < nx && x >= 0 && x < ny) top = std::max(top, at(h, y, x) + o.rise);
-            }
+            around(i, j, [&](int i2, int j2, double rise) { top = std::max(top, at(h, i2, j2) + rise); });
             z[std::size_t(j) * nx + i] = top;
         }
     double added = 0;
     std::vector<float> out(h.size());
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
-            double low = std::numeric_limits<double>::infinity();
-            for (const Offset& o : ball) {
-                const int y = i + o.a, x = j + o.b;
-                if (y >= 0 && y < nx && x >= 0 && x < ny) low = std::min(low, at(z, y, x) - o.rise);
-            }
             const std::size_t k = std::size_t(j) * nx + i;
+            out[k] = float(h[k]);
+            if (!reach[k]) continue;  // out of the ball's reach of any tight vertex: untouched
+            double low = std::numeric_limits<double>::infinity();
+            around(i, j, [&](int i2, int j2, double rise) { low = std::min(low, at(z, i2, j2) - rise); });
             // Rounding may leave low a hair under h where the ball touches: keep h there.
-            const double kept = reach[k] ? std::max(low, h[k]) : h[k];
-            out[k] = float(kept);
+            out[k] = float(std::max(low, h[k]));
             added = std::max(added, double(out[k]) - h[k]);
         }
     surface.set_heights(out);

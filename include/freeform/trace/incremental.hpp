@@ -369,9 +369,7 @@ public:
                 index_.assign(std::int32_t(begin + std::int64_t(k)),
                               std::span(cells.data() + starts[k], std::size_t(starts[k + 1] - starts[k])));
         }
-        status_weight_.fill(0);
-        for (std::size_t k = 0; k < records_.size(); ++k)
-            account_weight(status_weight_, records_[k], rays_->weight[k]);
+        recount_status_weights();
         return histogram();
     }
 
@@ -390,9 +388,7 @@ public:
             visit.finish();
             index_.assign(std::int32_t(k), cells);
         }
-        status_weight_.fill(0);
-        for (std::size_t k = 0; k < records_.size(); ++k)
-            account_weight(status_weight_, records_[k], rays_->weight[k]);
+        recount_status_weights();
         return histogram();
     }
 
@@ -687,9 +683,16 @@ private:
         if (now == before) return;
         ++out.rays_moved;
         const Fixed w = rays_->weight[std::size_t(id)];
-        account_weight(out.status_delta, before, w, -1);
-        account_weight(out.status_delta, now, w);
-        move_deposit(before, now, w, out.histogram);
+        const Fixed w_before = delivered_weight(before, w), w_now = delivered_weight(now, w);
+        account_weight(out.status_delta, before.status, w, w_before, -1);
+        account_weight(out.status_delta, now.status, w, w_now);
+        move_deposit(before, now, w_before, w_now, out.histogram);
+    }
+
+    // The weight per slot of the maintained records, from scratch.
+    void recount_status_weights() {
+        status_weight_.fill(0);
+        for (std::size_t k = 0; k < records_.size(); ++k) account_weight(status_weight_, records_[k], rays_->weight[k]);
     }
 
     std::int64_t cell_count() const { return std::int64_t(surface_->nx() - 1) * (surface_->ny() - 1); }
@@ -809,12 +812,14 @@ private:
             }
     }
 
-    // Removes a ray's old deposit and adds its new one. A ray that moves a little keeps
-    // its four bilinear cells: their differences are added once instead of eight times.
-    void move_deposit(const RayRecord& before, const RayRecord& now, Fixed w, SparseDelta& d) const {
+    // Removes a ray's old deposit (w_before, the weight it delivered) and adds its new one
+    // (w_now). A ray that moves a little keeps its four bilinear cells: their differences
+    // are added once instead of eight times.
+    void move_deposit(const RayRecord& before, const RayRecord& now, Fixed w_before, Fixed w_now,
+                      SparseDelta& d) const {
         const bool was = before.status == RayStatus::receiver, is = now.status == RayStatus::receiver;
-        const Splat a = was ? splat(params_.receiver, before.px, before.py, delivered_weight(before, w)) : Splat{};
-        const Splat b = is ? splat(params_.receiver, now.px, now.py, delivered_weight(now, w)) : Splat{};
+        const Splat a = was ? splat(params_.receiver, before.px, before.py, w_before) : Splat{};
+        const Splat b = is ? splat(params_.receiver, now.px, now.py, w_now) : Splat{};
         if (was && is && a.cell[0] == b.cell[0] && a.cell[3] == b.cell[3]) {  // the same four cells
 #pragma GCC unroll 4
             for (int k = 0; k < 4; ++k)

@@ -50,12 +50,16 @@ struct RayRecord {
 // w - delivered_weight, was reflected away at refractive faces.
 FREEFORM_HD inline Fixed delivered_weight(const RayRecord& r, Fixed w) { return fixed_part(w, r.transmit); }
 
-// Adds ray record r of weight w to per-slot weights (sign -1 takes it away).
+// Adds a ray of weight w that ended with `status` and delivered `delivered` of it to
+// per-slot weights (sign -1 takes it away).
 template <class Slots>
-inline void account_weight(Slots& slots, const RayRecord& r, Fixed w, int sign = 1) {
-    const Fixed delivered = delivered_weight(r, w);
-    slots[std::size_t(r.status)] += sign * delivered;
+inline void account_weight(Slots& slots, RayStatus status, Fixed w, Fixed delivered, int sign = 1) {
+    slots[std::size_t(status)] += sign * delivered;
     if (delivered != w) slots[fresnel_reflected_slot] += sign * (w - delivered);
+}
+template <class Slots>
+inline void account_weight(Slots& slots, const RayRecord& r, Fixed w) {
+    account_weight(slots, r.status, w, delivered_weight(r, w));
 }
 
 // The receiver plane in the surface frame.
