@@ -9,8 +9,9 @@
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
 #                         (the full study reuses the runs in benchmarks/results/runs, the committed
 #                         ones included; STUDY_ARGS=--fresh measures every run again)
-#   make validate       independent check with POV-Ray 3.7 photon mapping: designs E, F, L and the
-#                       headlight, renders them in POV-Ray, compares (benchmarks/results/validation.md;
+#   make validate       independent check with POV-Ray 3.7 photon mapping: designs E, F, L, the
+#                       headlight, E in sunlight, L with Fresnel losses, renders them in POV-Ray,
+#                       compares (benchmarks/results/validation.md;
 #                       VALIDATE_ARGS="--reuse DIR" reuses designs, see scripts/validate/validate.py -h)
 # The presets set FREEFORM_WERROR=ON, so warnings are errors in every build made here and in
 # CI; a plain `cmake -B build` leaves it OFF (warnings stay warnings for users' compilers).

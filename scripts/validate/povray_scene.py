@@ -12,6 +12,15 @@ Choices, and why (docs: README "Independent validation"):
 - Light: `parallel` for a collimated light, a plain point light for a point light (POV-Ray
   lights have no distance falloff by default, and photons are shot evenly over solid angle,
   so the photon density on the mirror is the physical cos/r^2 of an isotropic source).
+- A collimated light with an angular radius (the sun's disc) becomes `sun_lights` parallel
+  lights of power 1/N each, their directions spread evenly over the disc's solid angle
+  (equal-area rings, a golden-angle spiral): a discretisation of our own, independent of
+  freeform's 8-direction ring-and-sector sampler. POV-Ray's `area_light` cannot stand in:
+  it moves a light's origin, not its direction, and photons leave from its centre.
+- Fresnel (scene `trace.fresnel`, lenses only): the lens finish gets `reflection { 0, 1
+  fresnel on } conserve_energy`, so what a face reflects is taken from what it transmits
+  (POV-Ray's own Fresnel formula), and the lens's photons do not follow reflection, as
+  freeform drops the reflected part (docs/scene.md).
 - The receiver is a diffuse plane (ambient 0, diffuse 1, no specular/phong) that collects
   photons. It sits in a `light_group` with `global_lights off`, so the light does not
   illuminate it directly (freeform records only light that has left the surface); photons
@@ -72,7 +81,27 @@ def mesh2(vertices, triangles):
     return "\n".join(out)
 
 
-def write_scene(path, scene, mesh_path, width, height, photon_count, gather=(100, 400)):
+def sun_directions(d, angular_radius_deg, n):
+    """(direction, power) pairs: d alone for parallel light; otherwise n directions spread
+    evenly over the cone of the given angular radius around d (equal solid angle each: ring
+    k of n sits where 1 - cos a = (1 - cos theta)(k + 1/2)/n, turned by the golden angle)."""
+    if angular_radius_deg <= 0:
+        return [(d, 1.0)]
+    theta = np.radians(angular_radius_deg)
+    e1 = np.cross(d, [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 = unit(e1)
+    e2 = np.cross(d, e1)
+    golden = np.pi * (3.0 - np.sqrt(5.0))
+    out = []
+    for k in range(n):
+        cos_a = 1.0 - (1.0 - np.cos(theta)) * (k + 0.5) / n
+        sin_a = np.sqrt(max(0.0, 1.0 - cos_a * cos_a))
+        phi = k * golden
+        out.append((cos_a * d + sin_a * (np.cos(phi) * e1 + np.sin(phi) * e2), 1.0 / n))
+    return out
+
+
+def write_scene(path, scene, mesh_path, width, height, photon_count, gather=(100, 400), sun_lights=64):
     """Writes the .pov file; width x height are the picture's pixels (any multiple of the
     receiver's resolution: the caller bins them down)."""
     surf, rec, light = scene["surface"], scene["receiver"], scene["light"]
@@ -92,9 +121,11 @@ def write_scene(path, scene, mesh_path, width, height, photon_count, gather=(100
         # on the axis through the middle of the target (measured: an off-axis parallel light
         # stores no photons).
         mid = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-        pos = mid - d * (np.dot(s_w, mid - s_origin) + top + 0.05 * dist + 0.01)
-        light_src = "light_source { %s color rgb 1 parallel point_at %s\n  photons { reflection on refraction on } }" % (
-            vec(pos * MM), vec(mid * MM))
+        reach = np.dot(s_w, mid - s_origin) + top + 0.05 * dist + 0.01
+        light_src = "\n".join(
+            "light_source { %s color rgb %.9g parallel point_at %s\n  photons { reflection on refraction on } }" % (
+                vec((mid - dk * reach) * MM), power, vec(mid * MM))
+            for dk, power in sun_directions(d, float(light.get("angular_radius", 0.0)), sun_lights))
     elif light["type"] == "point":
         if light.get("profile"):
             raise ValueError("a point light's intensity profile has no POV-Ray equivalent here")
@@ -104,10 +135,12 @@ def write_scene(path, scene, mesh_path, width, height, photon_count, gather=(100
         raise ValueError("light type %r is not validated" % light["type"])
 
     if lens:
+        fresnel = bool(scene.get("trace", {}).get("fresnel", False))
+        reflect = "reflection { 0, 1 fresnel on } conserve_energy" if fresnel else "reflection 0"
         body = mesh2(vertices, triangles) + "\n  inside_vector %s\n" % vec(s_w) + (
-            "  texture { pigment { rgbf <1, 1, 1, 1> } finish { ambient 0 emission 0 diffuse 0 specular 0 phong 0 reflection 0 } }\n"
+            "  texture { pigment { rgbf <1, 1, 1, 1> } finish { ambient 0 emission 0 diffuse 0 specular 0 phong 0 %s } }\n"
             "  interior { ior %.6g }\n"
-            "  photons { target refraction on reflection off collect off }\n}" % material["refractive"])
+            "  photons { target refraction on reflection off collect off }\n}" % (reflect, material["refractive"]))
     else:
         body = mesh2(vertices, triangles) + (
             "\n  texture { pigment { rgb 1 } finish { ambient 0 emission 0 diffuse 0 specular 0 phong 0 reflection { 1 } } }\n"
