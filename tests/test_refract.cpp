@@ -7,6 +7,7 @@
 #include <cmath>
 #include <vector>
 
+#include <freeform/design/cell_means.hpp>
 #include <freeform/objective/target.hpp>
 #include <freeform/surface/export.hpp>
 #include <freeform/surface/triangle_mesh.hpp>
@@ -177,6 +178,20 @@ TEST_CASE("Fresnel: a flat lens at normal incidence passes (1 - R)^2; the rest i
     MESSAGE("flat Fresnel lens against its own footprint: error ", fair, " (", blamed, " against the unreduced total)");
     CHECK(fair < 1e-6);
     CHECK(blamed == doctest::Approx((1 - single_pass) / 2).epsilon(1e-4));
+
+    // The cell means (error_physical) judge the same way and report the share delivered,
+    // not the share of what a flat lens passes.
+    CellMeanOptions o;
+    o.rays_per_cell = 16;
+    const CellMeans cells = converged_cell_means(s, flat, &footprint, o,
+                                                 [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& t) {
+                                                     const Traced tr = trace_scene(sc, flat, batch);
+                                                     h = tr.histogram;
+                                                     t = tr.totals;
+                                                 });
+    CHECK(cells.totals.energy() == doctest::Approx(single_pass).epsilon(1e-6));
+    CHECK(cells.error < 0.01);  // the flat lens's own footprint, up to the nearest deposit's edges
+
     s.trace.fresnel = false;
     CHECK(target_total(rays, make_path_params(s)) == rays.total);
 }

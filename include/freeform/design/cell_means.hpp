@@ -56,7 +56,8 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
     s.light.rays_per_cell = target ? o.rays_per_cell : o.max_rays_per_cell;
     CellMeans out;
     out.histogram = Histogram(s.receiver.width, s.receiver.height);
-    Fixed total = 0;
+    Fixed total = 0;    // the target's: what a flat surface would deliver (trace/setup.hpp)
+    Fixed emitted = 0;  // the light's, so energy() is the share delivered, as the design's
     double previous = -1;
     while (true) {
         const RaySet rays = generate_rays(s.light, grid, s.receiver, hash_combine(o.seed, std::uint64_t(out.batches) + 1));
@@ -65,6 +66,7 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
         trace(static_cast<const Scene&>(s), rays, batch, batch_totals);
         for (std::size_t k = 0; k < batch.cells.size(); ++k) out.histogram.cells[k] += batch.cells[k];
         out.totals.merge(batch_totals);
+        emitted += batch_totals.emitted;
         total += target_total(rays, params);
         out.rays += rays.size();
         ++out.batches;
@@ -83,7 +85,7 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
         previous = out.error;
         if (2.0 * out.batches * o.rays_per_cell > o.max_rays_per_cell) break;
     }
-    out.totals.emitted = total;
+    out.totals.emitted = emitted;
     return out;
 }
 
