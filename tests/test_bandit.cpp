@@ -80,7 +80,7 @@ TEST_CASE_TEMPLATE("a learning bandit favours the best arm of a stationary probl
 }
 
 TEST_CASE("make_bandit builds every named bandit, and each learns through AnyBandit") {
-    for (auto name : bandit_names) {
+    for (auto name : bandit_kind_names) {
         AnyBandit b = make_bandit(name, 5, 32);
         CHECK(b.arms() == 5);
         CHECK(b.sync_interval() == 32);

@@ -331,16 +331,16 @@ TEST_CASE("same seed, same result; any thread count and speculation width, same 
     struct Variant {
         const char* name;
         int threads, speculative;
-        const char* evaluation;
+        EvaluationMode evaluation;
     };
     const Variant variants[] = {
-        {"same settings again", 1, 0, "incremental"},
-        {"two threads, one proposal per thread", 2, 0, "incremental"},
-        {"two threads, eight proposals at once", 2, 8, "incremental"},
-        {"one thread, four proposals at once", 1, 4, "incremental"},
+        {"same settings again", 1, 0, EvaluationMode::incremental},
+        {"two threads, one proposal per thread", 2, 0, EvaluationMode::incremental},
+        {"two threads, eight proposals at once", 2, 8, EvaluationMode::incremental},
+        {"one thread, four proposals at once", 1, 4, EvaluationMode::incremental},
         // Every move judged by a full retrace: slower moves, the same trajectory (the
         // incremental objective is exact, and nothing depends on measured speed).
-        {"full-retrace evaluation", 2, 0, "full"},
+        {"full-retrace evaluation", 2, 0, EvaluationMode::full},
     };
     for (const Variant& v : variants) {
         CAPTURE(v.name);

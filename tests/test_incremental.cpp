@@ -9,7 +9,7 @@
 #include <freeform/design/problem.hpp>
 #include <freeform/trace/incremental.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
-#include <freeform/trace/embree_incremental.hpp>
+#include <freeform/design/embree_incremental.hpp>
 #endif
 
 #include "support.hpp"
@@ -293,10 +293,10 @@ TEST_CASE("maintained histogram and objective equal a full recompute after 10,00
     for (const Case& c : cases()) {
         CAPTURE(c.name);
         Setup s = make_setup(c);
-        ReflectorProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+        SurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                  make_bandit("history", 7), 1e-4, 1.0);
         check_problem(problem, [&] {
-            ReflectorProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+            SurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                    make_bandit("history", 7), 1e-4, 1.0);
             return fresh.value();
         });
@@ -310,12 +310,12 @@ TEST_CASE("an Embree problem annealed with speculative windows on 2 threads foll
     // The Embree backend shows each move to its acceleration structure to evaluate it, so
     // its deltas must run one at a time (concurrent_deltas = false): speculative windows
     // then evaluate their proposals in turn, and the run is the serial one bit for bit.
-    static_assert(!EmbreeReflectorProblem::concurrent_deltas && ReflectorProblem::concurrent_deltas);
+    static_assert(!EmbreeSurfaceProblem::concurrent_deltas && SurfaceProblem::concurrent_deltas);
     const Case c = cases().front();
     const auto run = [&](int speculative, int threads) {
         Setup s = make_setup(c);
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
-        EmbreeReflectorProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+        EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                        make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
         AnnealOptions o;
         o.seed = 11;
@@ -339,11 +339,11 @@ TEST_CASE("the Embree backend keeps the same invariant, refitting only touched t
         CAPTURE(c.name);
         Setup s = make_setup(c);
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
-        EmbreeReflectorProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+        EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                        make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
         check_problem(problem, [&] {
             EmbreeTracer t2(s.hm, s.rays, s.pp, {}, 8);
-            EmbreeReflectorProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+            EmbreeSurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                          make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&t2, &s.hm});
             return fresh.value();
         });
@@ -365,14 +365,14 @@ TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's re
         Setup s = make_setup(all.front());
         ProposalSettings ps = proposals();
         ps.error_guided = guided;
-        ReflectorProblem strip(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
-        ReflectorProblem whole(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
-        ReflectorProblem plain(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        SurfaceProblem strip(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        SurfaceProblem whole(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        SurfaceProblem plain(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
         strip.set_centre_rows(10, 20);
         whole.set_centre_rows(0, s.hm.ny());
         const int reach = 5 / 2;  // default_kernel_bank(5): 5 × 5 vertices around the centre
         int lowest = s.hm.ny(), highest = -1;
-        ReflectorProblem::Move a, b, p;
+        SurfaceProblem::Move a, b, p;
         bool same = true;
         for (std::uint64_t it = 0; it < 2000; ++it) {
             CounterRng r1(91, it), r2(91, it), r3(91, it);

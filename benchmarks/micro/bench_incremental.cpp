@@ -22,7 +22,7 @@
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/setup.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
-#include <freeform/trace/embree_incremental.hpp>
+#include <freeform/design/embree_incremental.hpp>
 #endif
 
 using namespace freeform;
@@ -126,7 +126,7 @@ void incremental(benchmark::State& state) {
     const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
     const int speculative = int(state.range(3)), threads = int(state.range(4));
     Bench b(mesh, resolution);
-    ReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
+    SurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
                              make_bandit("uniform", 7), b.unit(), 1.0);
     const double rays = rays_per_move(problem);
     run_annealer(state, problem, speculative, threads, 2000);
@@ -187,7 +187,7 @@ void embree_incremental(benchmark::State& state) {
     const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
     Bench b(mesh, resolution);
     EmbreeTracer tracer(b.surface, b.rays, b.params);
-    EmbreeReflectorProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
+    EmbreeSurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
                                    make_bandit("uniform", 7), b.unit(), 1.0, EmbreeBackend{&tracer, &b.surface});
     const double rays = rays_per_move(problem);
     run_annealer(state, problem, 1, 1, 300);

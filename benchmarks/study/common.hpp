@@ -25,7 +25,7 @@
 
 #include <freeform/design/designer.hpp>
 #include <freeform/design/fabrication.hpp>
-#include <freeform/design/report_json.hpp>
+#include <freeform/io/report_json.hpp>
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>
 #include <freeform/io/target.hpp>

@@ -165,7 +165,7 @@ int run(const Args& a) {
         out["iterations"] = 0;
         out["evaluations"] = 0;
         out["iterations_per_second"] = 0.0;
-        out["start"] = start_report_json(s.report);
+        out["start"] = io::start_report_json(s.report);
         // One trace point: the start's error and energy as the library measured them (run
         // seed, final receiver resolution; the objective is not computed there: 0).
         if (s.report.error >= 0) trace.push_back({seconds, 0, 0, s.report.error, s.report.energy, 0.0});
@@ -197,11 +197,11 @@ int run(const Args& a) {
         out["proposals_evaluated"] = proposals;
         out["accepted"] = r.accepted;
         out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
-        out["stages"] = stage_reports_json(r.stages);
-        out["start"] = start_report_json(r.start);
-        out["bandit"] = o.bandit;
-        out["evaluation"] = o.evaluation;
-        out["kernel_shapes"] = o.kernel_shapes;
+        out["stages"] = io::stage_reports_json(r.stages);
+        out["start"] = io::start_report_json(r.start);
+        out["bandit"] = to_string(o.bandit);
+        out["evaluation"] = to_string(o.evaluation);
+        out["kernel_shapes"] = to_string(o.kernel_shapes);
         out["max_iterations"] = o.max_iterations;
         out["stop_reasons"] = json::array();
         for (const auto& s : r.stages) out["stop_reasons"].push_back(s.stop_reason);

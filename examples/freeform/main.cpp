@@ -35,12 +35,14 @@
 
 #include <freeform/design/cell_means.hpp>
 #include <freeform/design/designer.hpp>
+#include <freeform/design/pipeline.hpp>
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/machining.hpp>
-#include <freeform/design/report_json.hpp>
 #include <freeform/design/resources.hpp>
 #include <freeform/io.hpp>
+#include <freeform/io/report_json.hpp>
 #include <freeform/io/scene_file.hpp>
+#include <freeform/io/heightmap.hpp>
 #include <freeform/io/staged_output.hpp>
 #include <freeform/io/target.hpp>
 #include <freeform/objective/target.hpp>
@@ -217,23 +219,6 @@ constexpr bool mpi_built =
     false;
 #endif
 
-// The final mesh of a scene whose mesh is "auto": what the designer's plan ends with.
-std::pair<int, int> final_mesh(const Scene& scene) {
-    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    const auto levels = plan_levels(scene);
-    return {levels.back().mesh_x, levels.back().mesh_y};
-}
-
-// A heightmap from a PFM file, on the grid the file has.
-Heightmap heightmap_from_pfm(Scene scene, const fs::path& file, const Limits& limits) {
-    const ImageF img = io::read_pfm(file, limits);
-    if (img.cols() < 2 || img.rows() < 2)
-        throw InputError("--heightmap: " + file.string() + " must be at least 2 x 2 pixels");
-    scene.surface.initial_pfm = file;
-    scene.surface.initial_paraboloid.reset();
-    return io::make_initial_heightmap(scene, int(img.cols()), int(img.rows()), limits);
-}
-
 struct RenderOutcome {
     Histogram histogram;
     TraceTotals totals;
@@ -269,39 +254,6 @@ RenderOutcome render_with(const T& tracer, const RaySet& rays, int threads, Stat
     status.finish();
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return out;
-}
-
-json totals_json(const TraceTotals& t) {
-    const double n = double(t.emitted);
-    json j;
-    j["receiver"] = double(t.on_receiver()) / n;
-    j["missed_receiver"] = double(t.weight_by_status[std::size_t(RayStatus::missed_receiver)]) / n;
-    j["missed_surface"] = double(t.weight_by_status[std::size_t(RayStatus::missed_surface)]) / n;
-    j["total_internal_reflection"] = double(t.lost_tir()) / n;
-    j["max_depth"] = double(t.weight_by_status[std::size_t(RayStatus::lost_depth)]) / n;
-    j["absorbed"] = double(t.weight_by_status[std::size_t(RayStatus::absorbed)]) / n;
-    if (t.fresnel_reflected() != 0) j["fresnel_reflected"] = double(t.fresnel_reflected()) / n;
-    return j;
-}
-
-// Cell means for error_physical (docs/measures.md): rays of their own jitter, not the
-// design's, so the figure is not the one the design was fitted to.
-CellMeanOptions cell_mean_options(std::uint64_t seed) {
-    CellMeanOptions o;
-    o.seed = hash_combine(seed, 0x63656c6c6d65616eULL);
-    return o;
-}
-
-json cell_means_json(const CellMeans& c, const std::string& traced) {
-    json j;
-    j["traced"] = traced;
-    j["deposit"] = "nearest";
-    j["rays_per_cell"] = c.rays_per_cell;
-    j["rays"] = c.rays;
-    j["batches"] = c.batches;
-    j["change_on_doubling"] = c.change_on_doubling;
-    j["converged"] = c.converged;
-    return j;
 }
 
 ImageD target_image_of(const Target& t) {
@@ -378,216 +330,193 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
     staged.commit("metrics.json");
 }
 
-int run_render(const RenderArgs& a) {
-    // Under mpirun every rank would render the same: rank 0 does it alone.
-    if (world_rank != 0) return 0;
-    const Limits limits = parse_limits(a.limits);
-    Scene scene = io::load_scene(a.scene, limits);
+// What a render traces: the scene, the surface (a heightmap, the scene's start, or the
+// grid that places the rays when a mesh replaces it), the meshes, and how to trace them.
+struct RenderInputs {
+    Scene scene;
+    TracerDecision decision;
+    std::optional<MeshMaterial> mesh_material;  // --material: --mesh is a refractive solid
+    std::optional<ImageD> target;
+    Heightmap surface;
+    std::optional<StartReport> start;  // the scene's start was traced (transport)
+    std::optional<TriangleMesh> mesh;  // --mesh
+    std::vector<TriangleMesh> extra;   // the scene's meshes[]
+    int threads = 1;
+};
+
+// The surface a render traces without --mesh: the heightmap given, or the scene's start
+// as a design would begin (the transport surface by default).
+void render_surface(const RenderArgs& a, const Limits& limits, RenderInputs& in) {
+    const Scene& scene = in.scene;
+    if (!a.heightmap.empty()) {
+        try {
+            in.surface = io::read_heightmap(scene, a.heightmap, limits);
+        } catch (const InputError& e) {
+            throw InputError(std::string("--heightmap: ") + e.what());
+        }
+        return;
+    }
+    in.surface = io::scene_surface(scene, limits);
+    // Not needed when a mesh replaces the surface: the grid only places the rays.
+    if (in.target && a.mesh.empty() && starts_from_transport(scene) && scene.meshes.empty()) {
+        if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, in.surface);
+        DesignStart st = make_design_start(scene, std::move(in.surface), *in.target, scene.optimise.seed, in.threads);
+        in.start = st.report;
+        in.surface = std::move(st.surface);
+    }
+}
+
+// The meshes a render reads: --mesh and the scene's meshes[]. A solid is one surface:
+// corners repeated per face (OBJ with face normals, STL) are merged before its edges are
+// matched.
+void render_meshes(const RenderArgs& a, const Limits& limits, RenderInputs& in) {
+    if (!a.mesh.empty()) in.mesh = io::read_mesh(a.mesh, limits);
+    if (in.mesh && in.mesh_material) {
+        in.mesh = io::welded(*in.mesh);
+        check_refractive_solid(*in.mesh, a.mesh.string());
+    }
+    for (const auto& m : in.scene.meshes) {
+        in.extra.push_back(io::read_mesh(m.file, limits));
+        if (m.material.is_refractive()) {
+            in.extra.back() = io::welded(in.extra.back());
+            check_refractive_solid(in.extra.back(), m.file.string());
+        }
+    }
+    if (a.mesh_normals && a.mesh.empty() && in.scene.meshes.empty())
+        throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
+}
+
+RenderInputs render_inputs(const RenderArgs& a, const Limits& limits) {
+    RenderInputs in;
+    in.scene = io::load_scene(a.scene, limits);
+    Scene& scene = in.scene;
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
     check_output_dir(a.out, render_outputs);
-    check_resources(scene, RunKind::render, thread_count(exec::omp_t{a.threads}), limits);
+    in.threads = thread_count(exec::omp_t{a.threads});
+    check_resources(scene, RunKind::render, in.threads, limits);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
-    std::optional<MeshMaterial> mesh_material;
     if (!a.material.empty()) {
         if (a.mesh.empty()) throw InputError("--material: applies to the mesh of --mesh, and none was given");
-        mesh_material = parse_mesh_material(a.material);
+        in.mesh_material = parse_mesh_material(a.material);
     }
     const TracerChoice requested = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
-    const TracerDecision decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
-
-    std::optional<ImageD> target;
-    if (scene.target) target = io::load_target_image(scene, limits);
-    Heightmap surface;
-    std::optional<StartReport> start;
-    if (!a.heightmap.empty()) {
-        surface = heightmap_from_pfm(scene, a.heightmap, limits);
-    } else {
-        const auto [nx, ny] = final_mesh(scene);
-        surface = io::make_initial_heightmap(scene, nx, ny, limits);
-        // The scene's start, as a design would begin: the transport surface by default
-        // (not needed when a mesh replaces the surface: the grid only places the rays).
-        if (target && a.mesh.empty() && starts_from_transport(scene) && scene.meshes.empty()) {
-            if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, surface);
-            DesignStart st = make_design_start(scene, std::move(surface), *target, scene.optimise.seed,
-                                               thread_count(exec::omp_t{a.threads}));
-            start = st.report;
-            surface = std::move(st.surface);
-        }
-    }
-    std::optional<TriangleMesh> mesh;
-    if (!a.mesh.empty()) mesh = io::read_mesh(a.mesh, limits);
-    // A solid is one surface: corners repeated per face (OBJ with face normals, STL) are
-    // merged before its edges are matched.
-    if (mesh && mesh_material) {
-        mesh = io::welded(*mesh);
-        check_refractive_solid(*mesh, a.mesh.string());
-    }
-    std::vector<TriangleMesh> extra;
-    for (const auto& m : scene.meshes) {
-        extra.push_back(io::read_mesh(m.file, limits));
-        if (m.material.is_refractive()) {
-            extra.back() = io::welded(extra.back());
-            check_refractive_solid(extra.back(), m.file.string());
-        }
-    }
-
-    if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
-        throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
-    const int threads = thread_count(exec::omp_t{a.threads});
-    StatusLine status(true);
-    // Traces `rays` through what is rendered, with the receiver of `sc` (the scene, or
-    // its nearest-deposit twin for the cell means).
-    const auto trace = [&](const Scene& sc, RaySet& rays) {
-        PathParams pp = make_path_params(sc);
-        // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
-        if (mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
-        // A refractive solid is the whole lens: the scene's lens model (its flat back face)
-        // does not apply (and the beam starts above the solid, below).
-        if (mesh_material) pp.material = MaterialView{};
-        pp.interpolated_normals = a.mesh_normals;
-        if (decision.tracer == TracerChoice::heightfield)
-            return render_with(HeightfieldTracer(surface, rays, pp), rays, threads, status);
-#if defined(FREEFORM_WITH_EMBREE)
-        std::vector<ExtraMesh> extras;
-        for (std::size_t k = 0; k < extra.size(); ++k)
-            extras.push_back(to_surface_frame(extra[k], sc.surface.frame, sc.meshes[k].material));
-        if (mesh && mesh_material) {
-            ExtraMesh solid = to_surface_frame(*mesh, sc.surface.frame, *mesh_material);
-            start_above(sc.light, sc.surface.size, solid.mesh, rays);
-            extras.insert(extras.begin(), std::move(solid));
-            return render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, status);
-        }
-        if (mesh) {
-            const ExtraMesh local = to_surface_frame(*mesh, sc.surface.frame, true);
-            return render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, status);
-        }
-        return render_with(EmbreeTracer(surface, rays, pp, std::move(extras)), rays, threads, status);
-#else
-        return RenderOutcome{};  // choose_tracer never picks Embree in a build without it
-#endif
-    };
+    in.decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
+    if (scene.target) in.target = io::load_target_image(scene, limits);
+    render_surface(a, limits, in);
+    render_meshes(a, limits, in);
     // A surface (the scene's or a heightmap) is traced with the rays a design on its grid
     // fits (optimise.min_rays_per_mesh_cell), so a design's heightmap renders to its error.
-    if (!mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, surface.nx(), surface.ny());
-    RaySet rays = generate_rays(scene.light, surface, scene.receiver, scene.optimise.seed);
-    const RenderOutcome r = trace(scene, rays);
-    // With a target: the cell means of what was rendered (error_physical, docs/measures.md).
-    std::optional<CellMeans> cells;
-    if (target)
-        cells = converged_cell_means(scene, surface, &*target, cell_mean_options(scene.optimise.seed),
-                                     [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
-                                         RaySet own = batch;
-                                         RenderOutcome o = trace(sc, own);
-                                         h = std::move(o.histogram);
-                                         tt = o.totals;
-                                     });
+    if (!in.mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, in.surface.nx(), in.surface.ny());
+    return in;
+}
 
+// Traces `rays` through what is rendered, with the receiver of `sc` (the scene, or its
+// nearest-deposit twin for the cell means).
+RenderOutcome trace_render(const RenderInputs& in, const RenderArgs& a, const Scene& sc, RaySet& rays,
+                           StatusLine& status) {
+    PathParams pp = make_path_params(sc);
+    // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
+    if (in.mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
+    // A refractive solid is the whole lens: the scene's lens model (its flat back face)
+    // does not apply (and the beam starts above the solid, below).
+    if (in.mesh_material) pp.material = MaterialView{};
+    pp.interpolated_normals = a.mesh_normals;
+    if (in.decision.tracer == TracerChoice::heightfield)
+        return render_with(HeightfieldTracer(in.surface, rays, pp), rays, in.threads, status);
+#if defined(FREEFORM_WITH_EMBREE)
+    std::vector<ExtraMesh> extras;
+    for (std::size_t k = 0; k < in.extra.size(); ++k)
+        extras.push_back(to_surface_frame(in.extra[k], sc.surface.frame, sc.meshes[k].material));
+    if (in.mesh && in.mesh_material) {
+        ExtraMesh solid = to_surface_frame(*in.mesh, sc.surface.frame, *in.mesh_material);
+        start_above(sc.light, sc.surface.size, solid.mesh, rays);
+        extras.insert(extras.begin(), std::move(solid));
+        return render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, in.threads, status);
+    }
+    if (in.mesh) {
+        const ExtraMesh local = to_surface_frame(*in.mesh, sc.surface.frame, true);
+        return render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, in.threads, status);
+    }
+    return render_with(EmbreeTracer(in.surface, rays, pp, std::move(extras)), rays, in.threads, status);
+#else
+    (void)sc;
+    return RenderOutcome{};  // choose_tracer never picks Embree in a build without it
+#endif
+}
+
+json render_metrics(const RenderArgs& a, const RenderInputs& in, const RaySet& rays, const RenderOutcome& r,
+                    const std::optional<CellMeans>& cells) {
+    const Scene& scene = in.scene;
     json m;
     m["command"] = "render";
     m["scene"] = a.scene.string();
-    m["tracer"] = tracer_name(decision.tracer);
-    m["tracer_reason"] = decision.reason;
-    m["threads"] = threads;
+    m["tracer"] = tracer_name(in.decision.tracer);
+    m["tracer_reason"] = in.decision.reason;
+    m["threads"] = in.threads;
     m["seed"] = scene.optimise.seed;
     m["rays"] = rays.size();
     m["rays_hit_receiver"] = r.totals.rays_hit_receiver;
     m["energy"] = r.totals.energy();
-    m["where_light_went"] = totals_json(r.totals);
+    m["where_light_went"] = io::totals_json(r.totals);
     m["seconds"] = r.seconds;
     m["rays_per_second"] = r.seconds > 0 ? double(rays.size()) / r.seconds : 0.0;
-    m["mesh"] = json::array({surface.nx(), surface.ny()});
+    m["mesh"] = json::array({in.surface.nx(), in.surface.ny()});
     m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
-    if (mesh || !scene.meshes.empty())
+    if (in.mesh || !scene.meshes.empty())
         m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
-    if (mesh)
-        m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
-                                           : json("the scene's surface material");
-    if (target) {
-        m["error"] = l1_error(r.histogram, make_target(*target, scene.receiver.width, scene.receiver.height,
+    if (in.mesh)
+        m["mesh_material"] = in.mesh_material ? json{{"refractive", in.mesh_material->ior}}
+                                              : json("the scene's surface material");
+    if (in.target) {
+        m["error"] = l1_error(r.histogram, make_target(*in.target, scene.receiver.width, scene.receiver.height,
                                                        target_total(rays, make_path_params(scene))));
         m["error_physical"] = cells->error;
         m["energy_physical"] = cells->totals.energy();
-        m["cell_means"] = cell_means_json(*cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
+        m["cell_means"] = io::cell_means_json(*cells, in.mesh ? "the mesh, as rendered" : "the surface, as rendered");
     }
-    if (start) m["start"] = start_report_json(*start);
+    if (in.start) m["start"] = io::start_report_json(*in.start);
     m["effective_scene"] = scene_to_json(scene);
+    return m;
+}
 
+int run_render(const RenderArgs& a) {
+    // Under mpirun every rank would render the same: rank 0 does it alone.
+    if (world_rank != 0) return 0;
+    const Limits limits = parse_limits(a.limits);
+    const RenderInputs in = render_inputs(a, limits);
+    const Scene& scene = in.scene;
+    StatusLine status(true);
+    RaySet rays = generate_rays(scene.light, in.surface, scene.receiver, scene.optimise.seed);
+    const RenderOutcome r = trace_render(in, a, scene, rays, status);
+    // With a target: the cell means of what was rendered (error_physical, docs/measures.md).
+    std::optional<CellMeans> cells;
+    if (in.target)
+        cells = converged_cell_means(scene, in.surface, &*in.target, physical_cell_mean_options(scene.optimise.seed),
+                                     [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
+                                         RaySet own = batch;
+                                         RenderOutcome o = trace_render(in, a, sc, own, status);
+                                         h = std::move(o.histogram);
+                                         tt = o.totals;
+                                     });
+    const json m = render_metrics(a, in, rays, r, cells);
     write_render_outputs(a.out, m, r.histogram, cells);
-    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(decision.tracer),
-                decision.reason.c_str());
+    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(in.decision.tracer),
+                in.decision.reason.c_str());
     if (cells)
         std::printf("  error_physical %.4f, energy %.4f: cell means, nearest deposit, %.0f rays per cell\n",
                     cells->error, cells->totals.energy(), cells->rays_per_cell);
     std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
-                r.totals.energy(), target ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "", r.seconds,
-                m["rays_per_second"].get<double>() / 1e6);
-    if (start)
-        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", start->used.c_str(), start->flat_error);
+                r.totals.energy(), in.target ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "",
+                r.seconds, m["rays_per_second"].get<double>() / 1e6);
+    if (in.start)
+        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", in.start->used.c_str(),
+                    in.start->flat_error);
     std::printf("  results in %s/\n", a.out.string().c_str());
     return 0;
 }
 
 // ---------------------------------------------------------------------------- design
-
-struct ExportEvaluation {
-    std::optional<double> error_exported;  // the exported mesh on the design's rays and deposit
-    std::optional<CellMeans> cells;        // its cell means (error_physical); none without Embree
-};
-
-// metrics.json's "fabrication" block (design/machining.hpp): what a machinist checks.
-json fabrication_json(const MachiningReport& r) {
-    json f;
-    f["cutter_side"] = "+normal of the surface frame: the light's side of a mirror, the air side of a lens's front face";
-    f["min_concave_radius"] = r.min_concave_radius ? json(*r.min_concave_radius) : json(nullptr);
-    f["min_concave_radius_at"] = {r.min_concave_u, r.min_concave_v};
-    f["max_slope_degrees"] = r.max_slope_degrees;
-    f["sag"] = {{"min", r.sag_min}, {"max", r.sag_max}, {"range", r.sag_range()}};
-    f["bounding_box"] = {{"min", {r.box_min.x, r.box_min.y, r.box_min.z}},
-                         {"max", {r.box_max.x, r.box_max.y, r.box_max.z}}};
-    if (r.min_glass_thickness) f["min_glass_thickness"] = *r.min_glass_thickness;
-    f["units"] = "metres and degrees; curvatures from central differences of the heights (design/machining.hpp)";
-    return f;
-}
-
-// Traces a design's exported part (design/exported.hpp): with the design's rays (a
-// diagnostic) and as converged cell means (error_physical, docs/measures.md). Fills
-// metrics' error_exported, energy_exported, error_physical, energy_physical, cell_means
-// and export.
-ExportEvaluation evaluate_export(const Scene& scene, const Heightmap& surface, const Fabrication& fabrication,
-                                 const RaySet& rays, const Histogram& hist, const Target& t, const ImageD& target,
-                                 const DesignOptions& options, json& m) {
-    json exported;
-    exported["subdivisions"] = fabrication.subdivisions;
-    exported["subdivisions_chosen"] =
-        fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
-    exported["facet_normal_error_mrad"] = fabrication.normal_error * 1e3;
-    exported["facet_normal_tolerance_mrad"] = fabrication.normal_tolerance * 1e3;
-    exported["triangles"] = fabrication.mesh.triangles.size();
-    ExportEvaluation ev;
-#if defined(FREEFORM_WITH_EMBREE)
-    const ExportedGeometry geometry = exported_geometry(scene, surface, fabrication.subdivisions);
-    const ExportedTrace et = trace_exported(exec::omp_t{options.threads}, scene, geometry, rays);
-    ev.error_exported = l1_error(et.histogram, t);
-    m["error_exported"] = *ev.error_exported;
-    m["energy_exported"] = et.totals.energy();
-    exported["l1_to_design_irradiance"] = l1_error(et.histogram.cells, hist.cells, rays.total);
-    ev.cells = exported_cell_means(exec::omp_t{options.threads}, scene, surface, geometry, &target,
-                                   cell_mean_options(options.seed));
-    m["error_physical"] = ev.cells->error;
-    m["energy_physical"] = ev.cells->totals.energy();
-    m["cell_means"] = cell_means_json(*ev.cells, "the exported surface.obj traced as flat triangles");
-#else
-    (void)scene, (void)surface, (void)rays, (void)hist, (void)t, (void)target, (void)options;
-    m["error_exported"] = nullptr;
-    m["error_physical"] = nullptr;
-    exported["not_traced"] = "built without Embree";
-#endif
-    m["export"] = exported;
-    m["fabrication"] = fabrication_json(machining_report(scene, surface, fabrication.mesh));
-    if (scene.surface.tool_radius > 0) m["fabrication"]["tool_radius"] = scene.surface.tool_radius;
-    return ev;
-}
 
 
 struct DesignArgs {
@@ -657,11 +586,11 @@ RankLayout rank_layout(int threads) {
 // A design's files. Every file is staged and moved into place together, metrics.json
 // last (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside
 // a partial result, and a failed write leaves the previous results as they were.
-void write_design_outputs(const fs::path& out, const json& m, const std::string& csv, const ImageF& heights,
+void write_design_outputs(const fs::path& out, const json& m, const std::string& csv, const Heightmap& surface,
                           const ImageD& irradiance, const ImageD& target_img, const TriangleMesh& fab) {
     io::StagedOutput staged(out);
     staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, csv); });
-    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_pfm(f, heights); });
+    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, surface); });
     staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
     staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
     staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
@@ -675,11 +604,13 @@ void write_design_outputs(const fs::path& out, const json& m, const std::string&
 
 // The summary a design prints (always, --quiet or not): error_physical first, then the
 // diagnostics, the machining figures, the start and where the results are.
-void print_design_summary(const DesignResult& result, const json& m, const std::optional<CellMeans>& cells,
-                          std::size_t triangles, std::pair<double, double> fitted,
-                          const std::optional<double>& error_held_out, const std::optional<double>& error_exported,
-                          const fs::path& out) {
-    const auto [error, energy] = fitted;
+void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out) {
+    const DesignResult& result = d.result;
+    const std::optional<CellMeans>& cells = d.exported.cells;
+    const std::size_t triangles = d.exported.fabrication.mesh.triangles.size();
+    const double error = d.fitted.error, energy = d.fitted.totals.energy();
+    const std::optional<double>& error_held_out = d.error_held_out;
+    const std::optional<double>& error_exported = d.exported.error_exported;
     std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
                 (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                 result.stopped_early ? " -- best result so far written" : "");
@@ -716,11 +647,82 @@ void print_design_summary(const DesignResult& result, const json& m, const std::
                 out.string().c_str());
 }
 
-int run_design(const DesignArgs& a) {
-    const Limits limits = parse_limits(a.limits);
+// metrics.json's "replicas" block: how the MPI ranks shared the design.
+#if defined(FREEFORM_WITH_MPI)
+struct ReplicaRun {
+    mpi::ReplicaOptions options;
+    RankLayout layout;
+    int winner = 0;
+    std::vector<double> objectives;
+    std::int64_t iterations_all = 0;
+};
+
+json replicas_json(const mpi::Replicas& replicas, const ReplicaRun& run, bool judged_held_out) {
+    const mpi::ReplicaOptions& o = run.options;
+    json r;
+    r["ranks"] = world_size;
+    r["mode"] = mpi::to_string(o.mode);
+    const bool domains = o.mode == mpi::ReplicaMode::domains;
+    if (domains) {
+        r["exchange"] = "surfaces: every rank's changes since the last merge are added up";
+        r["merges"] = replicas.merges();
+        json rows = json::array();
+        for (int k = 0; k < world_size; ++k) rows.push_back(json::array({double(k) / world_size, double(k + 1) / world_size}));
+        r["rows_per_rank"] = rows;  // fractions of the mesh's rows each rank moves
+        r["merge_coverage"] = o.merge_coverage;
+    } else {
+        r["ladder"] = "geometric";
+        r["ladder_ratio"] = o.ladder_ratio;
+        json scales = json::array();
+        for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
+        r["rung_temperature_scales"] = scales;
+        r["exchange"] = "temperatures";
+        json pairs = json::array();
+        for (const auto& p : replicas.pairs())
+            pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
+                             {"proposed", p.proposed},
+                             {"accepted", p.accepted},
+                             {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
+        r["pairs"] = pairs;
+        r["winner_final_rung"] = replicas.rungs()[std::size_t(run.winner)];
+        r["final_rungs"] = replicas.rungs();
+    }
+    if (o.exchange_every > 0)
+        r["exchange_every"] = o.exchange_every;
+    else
+        r["exchange_every"] = domains ? "automatic: merges every merge_coverage x (mesh vertices / ranks) / kernel "
+                                        "support^2 iterations, at least 500; the ranks meet every 500 to stop "
+                                        "together"
+                                      : "automatic: 500";
+    r["exchange_points"] = replicas.exchange_points();
+    r["winner_rank"] = run.winner;
+    r["objectives"] = run.objectives;  // what picked the winner: held-out when checked
+    r["objectives_judged_on"] = judged_held_out ? "held-out rays" : "fitted rays";
+    r["iterations_all_ranks"] = run.iterations_all;
+    r["threads_per_rank"] = run.layout.threads;
+    r["cores_per_rank"] = run.layout.cores;  // cores each rank was bound to (0: unknown)
+    r["seeds"] = "rank 0: the seed's own streams; rank r: hash(stage seed, r)";
+    return r;
+}
+
+mpi::ReplicaOptions replica_options(const DesignArgs& a) {
+    mpi::ReplicaOptions o;
+    o.mode = mpi::parse_replica_mode(a.replica_mode, "--replica-mode");
+    o.ladder_ratio = a.ladder_ratio;
+    o.exchange_every = a.exchange_every;
+    o.merge_coverage = a.merge_coverage;
+    // CLI11's range checks let NaN through: name the option, not the library's field.
+    if (!std::isfinite(a.ladder_ratio)) throw InputError("--ladder-ratio: must be a finite number >= 1, got nan");
+    if (!std::isfinite(a.merge_coverage)) throw InputError("--merge-coverage: must be a finite number > 0, got nan");
+    mpi::validate(o);
+    return o;
+}
+#endif
+
+// The scene of a design run: the file with the command line's settings.
+Scene design_scene(const DesignArgs& a, const Limits& limits) {
     Scene scene = io::load_scene(a.scene, limits);
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
-    check_output_dir(a.out, design_outputs);
     if (a.time_budget) {
         if (!(*a.time_budget > 0)) throw InputError("--time-budget: must be > 0 seconds");
         scene.optimise.time_budget = *a.time_budget;
@@ -730,17 +732,17 @@ int run_design(const DesignArgs& a) {
     if (!scene.meshes.empty())
         throw InputError(a.scene.string() +
                          ": meshes: designing with extra meshes is not supported yet (render them with --tracer embree)");
+    scene.optimise.progress_every = 500;  // the live line's pace
+    return scene;
+}
+
+int run_design(const DesignArgs& a) {
+    const Limits limits = parse_limits(a.limits);
+    const Scene scene = design_scene(a, limits);
+    check_output_dir(a.out, design_outputs);
     check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits);
     const ImageD target = io::load_target_image(scene, limits);
-    const auto [nx, ny] = final_mesh(scene);
-    // Enough rays for the final mesh (optimise.min_rays_per_mesh_cell): the design, its
-    // checks and the final render all use them (effective_scene records the figure).
-    scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
-    Heightmap initial = io::make_initial_heightmap(scene, nx, ny, limits);
-    const DesignOptions& options = scene.optimise;
-    // A transport start the scene asks for by name must be possible: say so before any work.
-    if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == "transport")
-        flat_footprint(scene, initial);
+    PlannedDesign plan = plan_design(scene, io::load_start_surface(scene, limits));
 
     std::signal(SIGINT, on_sigint);
     // With replicas, rank 0 alone reports: the other ranks run quiet.
@@ -748,223 +750,83 @@ int run_design(const DesignArgs& a) {
     StatusLine status(!quiet);
     if (!quiet)
         std::printf("designing %s: %d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu\n",
-                    a.scene.string().c_str(), nx, ny, scene.receiver.width, scene.receiver.height,
-                    scene.light.rays_per_cell, options.time_budget, (unsigned long long)options.seed);
-    DesignOptions run_options = options;
-    run_options.progress_every = 500;
-    DesignResult result;
+                    a.scene.string().c_str(), plan.initial.nx(), plan.initial.ny(), scene.receiver.width,
+                    scene.receiver.height, plan.scene.light.rays_per_cell, scene.optimise.time_budget,
+                    (unsigned long long)scene.optimise.seed);
+    DesignCallbacks callbacks;
+    callbacks.phase = [&](const std::string& what) {
+        if (!quiet) status.show(what);
+    };
+    callbacks.progress = [&](const DesignProgress& p) {
+        status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
+                    std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
+                    fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
+                    fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
+                    " it/s | " + fixed(p.time_left, 1) + " s left");
+        return interrupted.load();
+    };
 #if defined(FREEFORM_WITH_MPI)
-    mpi::ReplicaOptions replica_options;
-    replica_options.mode = mpi::parse_replica_mode(a.replica_mode, "--replica-mode");
-    replica_options.ladder_ratio = a.ladder_ratio;
-    replica_options.exchange_every = a.exchange_every;
-    replica_options.merge_coverage = a.merge_coverage;
-    // CLI11's range checks let NaN through: name the option, not the library's field.
-    if (!std::isfinite(a.ladder_ratio)) throw InputError("--ladder-ratio: must be a finite number >= 1, got nan");
-    if (!std::isfinite(a.merge_coverage)) throw InputError("--merge-coverage: must be a finite number > 0, got nan");
-    mpi::validate(replica_options);
-    mpi::Replicas replicas(MPI_COMM_WORLD, options.seed, replica_options);
-    const RankLayout layout = rank_layout(thread_count(exec::omp_t{options.threads}));
-    const bool abort_here = abort_requested_here();
-    int winner = 0;
-    std::vector<double> replica_objectives;
-    std::int64_t iterations_all = 0;
-#endif
+    std::optional<ReplicaRun> replica_run;
+    std::optional<mpi::Replicas> replicas;
+    CompletedDesign d;
     if (a.start_only) {
-#if defined(FREEFORM_WITH_MPI)
         // Rank 0 alone writes it: the others would only compute the same start.
         if (world_rank != 0) return 0;
-#endif
-        // The start alone (the transport surface, or whatever the scene starts from).
-        const auto t0 = std::chrono::steady_clock::now();
-        DesignStart start = make_design_start(scene, std::move(initial), target, options.seed,
-                                              thread_count(exec::omp_t{options.threads}));
-        result.start = start.report;
-        result.start.plan = "--start-only: no annealing";
-        result.surface = std::move(start.surface);
-        result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        d = design_start(std::move(plan), target, callbacks);
     } else {
-        if (!quiet) status.show("finding the start (" + requested_start(scene) + ")");
-        const auto progress = [&](const DesignProgress& p) {
-#if defined(FREEFORM_WITH_MPI)
+        ReplicaRun run{replica_options(a), {}, 0, {}, 0};
+        replicas.emplace(MPI_COMM_WORLD, scene.optimise.seed, run.options);
+        run.layout = rank_layout(thread_count(exec::omp_t{scene.optimise.threads}));
+        const bool abort_here = abort_requested_here();
+        const auto progress = callbacks.progress;
+        callbacks.progress = [&, progress](const DesignProgress& p) {
             if (abort_here) {
                 std::fprintf(stderr, "freeform: rank %d: dying on purpose (FREEFORM_TEST_ABORT_RANK)\n", world_rank);
                 std::abort();
             }
-#endif
-            status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
-                        std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
-                        fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
-                        fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
-                        " it/s | " + fixed(p.time_left, 1) + " s left");
-            return interrupted.load();
+            return progress(p);
         };
-#if defined(FREEFORM_WITH_MPI)
-        result = design(scene, std::move(initial), target, run_options, progress, default_penalties(run_options),
-                        replicas);
-        iterations_all = replicas.sum_on_root(result.iterations);
+        callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+        DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
+                                     callbacks.progress, default_penalties(plan.scene.optimise, scene.surface.tool_radius),
+                                     *replicas);
+        run.iterations_all = replicas->sum_on_root(result.iterations);
         // Ranks that share one surface all worked on the design: its moves are theirs.
-        if (replicas.shares_surface() && world_rank == 0) result.iterations = iterations_all;
-        winner = replicas.gather_best(result, &replica_objectives);
-#else
-        result = design(scene, std::move(initial), target, run_options, progress);
-#endif
+        if (replicas->shares_surface() && world_rank == 0) result.iterations = run.iterations_all;
+        run.winner = replicas->gather_best(result, &run.objectives);
+        // Only rank 0 goes on to evaluate and write the winner's design.
+        if (world_rank != 0) return result.stopped_early ? 130 : 0;
+        status.finish();
+        d = finish_design(plan.scene, std::move(result), target, callbacks);
+        replica_run = std::move(run);
     }
-#if defined(FREEFORM_WITH_MPI)
-    // Only rank 0 goes on to evaluate and write the winner's design.
-    if (world_rank != 0) return result.stopped_early ? 130 : 0;
+#else
+    const CompletedDesign d = a.start_only ? design_start(std::move(plan), target, callbacks)
+                                           : design(std::move(plan), target, callbacks);
 #endif
     status.finish();
-    // Keep catching Ctrl-C until the results are written: a second one must not leave
-    // half-written files (each file is written atomically, but the set should be whole).
-    if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
-    // The tool's cut last of all: every figure below describes what the mill leaves.
-    if (scene.surface.tool_radius > 0)
-        result.tool_cut = std::max(result.tool_cut, cut_with_ball(result.surface, scene.surface.tool_radius));
 
-    // Final evaluation at the scene's full resolution, with the scene's seed (the rays the
-    // design was fitted to) and, unless the checks are off, with the held-out rays of the
-    // final level (design/held_out.hpp), which it was not fitted to.
-    const PathParams pp = make_path_params(scene);
-    struct Render {
-        RaySet rays;
-        Histogram hist;
-        TraceTotals totals;
-        Target scaled;  // the target scaled to these rays' total
-    };
-    const auto render = [&](std::uint64_t seed) {
-        Render r{generate_rays(scene.light, result.surface, scene.receiver, seed),
-                 Histogram(scene.receiver.width, scene.receiver.height), {}, {}};
-        HeightfieldTracer(result.surface, r.rays, pp).trace_all(exec::omp_t{options.threads}, r.hist, r.totals);
-        r.scaled = make_target(target, scene.receiver.width, scene.receiver.height, target_total(r.rays, pp));
-        return r;
-    };
-    const Render fitted = render(options.seed);
-    const RaySet& rays = fitted.rays;
-    const Histogram& hist = fitted.hist;
-    const TraceTotals& totals = fitted.totals;
-    const Target& t = fitted.scaled;
-    const double error = l1_error(hist, t);
-    std::optional<double> error_held_out;
-    if (result.held_out.total >= 0) {
-        const Render held = render(result.held_out_seed);
-        error_held_out = l1_error(held.hist, held.scaled);
-    }
-
-    json m;
+    json m = io::design_metrics_json(d);
     m["command"] = "design";
     m["scene"] = a.scene.string();
-    m["error"] = error;
-    if (error_held_out) m["error_held_out"] = *error_held_out;
-    m["energy"] = totals.energy();
-    m["objective"] = result.value.total;
-    if (result.held_out.total >= 0) m["objective_held_out"] = result.held_out.total;
-    m["iterations"] = result.iterations;
-    if (scene.surface.tool_radius > 0) m["tool_cut_max_added"] = result.tool_cut;  // metres of material the cutter left
-    m["accepted"] = result.accepted;
-    m["seconds"] = result.seconds;
-    m["iterations_per_second"] = result.seconds > 0 ? double(result.iterations) / result.seconds : 0.0;
-    m["seed"] = options.seed;
-    m["tracer"] = "heightfield";
-    m["interrupted"] = result.stopped_early;
-    m["rays"] = rays.size();
-    m["mesh"] = json::array({result.surface.nx(), result.surface.ny()});
-    m["where_light_went"] = totals_json(totals);
-    json bank = json::array();
-    for (std::size_t k = 0; k < result.kernel_bank.size(); ++k) {
-        const auto& s = result.kernel_bank[k];
-        bank.push_back({{"sigma_x", s.sigma_x}, {"sigma_y", s.sigma_y}, {"rho", s.rho}, {"support", s.support},
-                        {"weight", k < result.bandit_weights.size() ? result.bandit_weights[k] : 0.0}});
-    }
-    m["bandit"] = options.bandit;
-    m["bandit_weights"] = result.bandit_weights;
-    if (!result.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = result.preprocess_rates;
-    m["kernels"] = bank;
-    m["levels"] = stage_reports_json(result.stages);
-    m["start"] = start_report_json(result.start);
-    m["effective_scene"] = scene_to_json(scene);
 #if defined(FREEFORM_WITH_MPI)
-    {
-        json r;
-        r["ranks"] = world_size;
-        r["mode"] = mpi::to_string(replica_options.mode);
-        const bool domains = replica_options.mode == mpi::ReplicaMode::domains;
-        if (domains) {
-            r["exchange"] = "surfaces: every rank's changes since the last merge are added up";
-            r["merges"] = replicas.merges();
-            json rows = json::array();
-            for (int k = 0; k < world_size; ++k)
-                rows.push_back(json::array({double(k) / world_size, double(k + 1) / world_size}));
-            r["rows_per_rank"] = rows;  // fractions of the mesh's rows each rank moves
-        } else {
-            r["ladder"] = "geometric";
-            r["ladder_ratio"] = replica_options.ladder_ratio;
-            json scales = json::array();
-            for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
-            r["rung_temperature_scales"] = scales;
-            r["exchange"] = "temperatures";
-        }
-        if (replica_options.exchange_every > 0)
-            r["exchange_every"] = replica_options.exchange_every;
-        else
-            r["exchange_every"] = domains ? "automatic: merges every merge_coverage x (mesh vertices / ranks) / kernel "
-                                            "support^2 iterations, at least 500; the ranks meet every 500 to stop "
-                                            "together"
-                                          : "automatic: 500";
-        if (domains) r["merge_coverage"] = replica_options.merge_coverage;
-        r["exchange_points"] = replicas.exchange_points();
-        r["winner_rank"] = winner;
-        if (!domains) {
-            json pairs = json::array();
-            for (const auto& p : replicas.pairs())
-                pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
-                                 {"proposed", p.proposed},
-                                 {"accepted", p.accepted},
-                                 {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
-            r["pairs"] = pairs;
-            r["winner_final_rung"] = replicas.rungs()[std::size_t(winner)];
-            r["final_rungs"] = replicas.rungs();
-        }
-        r["objectives"] = replica_objectives;  // what picked the winner: held-out when checked
-        r["objectives_judged_on"] = result.held_out.total >= 0 ? "held-out rays" : "fitted rays";
-        r["iterations_all_ranks"] = iterations_all;
-        r["threads_per_rank"] = layout.threads;
-        r["cores_per_rank"] = layout.cores;  // cores each rank was bound to (0: unknown)
-        r["seeds"] = "rank 0: the seed's own streams; rank r: hash(stage seed, r)";
-        m["replicas"] = r;
-    }
+    if (replica_run) m["replicas"] = replicas_json(*replicas, *replica_run, d.result.held_out.total >= 0);
 #endif
-
-    std::ostringstream csv;
-    csv << "seconds,iteration,level,stage,error,energy,objective,temperature\n";
-    for (const auto& c : result.convergence)
-        csv << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
-            << c.energy << ',' << c.objective << ',' << c.temperature << '\n';
-
-    // The exported part, and what it does when traced as its flat facets.
-    if (!quiet) status.show("exporting the surface and tracing the exported mesh");
-    const Fabrication fabrication = make_fabrication(scene, result.surface);
-    const TriangleMesh& fab = fabrication.mesh;
-    const ExportEvaluation ev = evaluate_export(scene, result.surface, fabrication, fitted.rays, fitted.hist,
-                                                fitted.scaled, target, options, m);
-    const std::optional<double>& error_exported = ev.error_exported;
-    const std::optional<CellMeans>& cells = ev.cells;
-    status.finish();
     // The images show cell means of the exported part where it can be traced (Embree),
     // else the design's own irradiance.
-    const ImageD irradiance = cells ? cells->histogram.to_image() : hist.to_image();
-    const ImageD target_img = cells ? target_image_of(cells->target) : target_image_of(t);
-    ImageF heights(result.surface.ny(), result.surface.nx());
-    for (int j = 0; j < result.surface.ny(); ++j)
-        for (int i = 0; i < result.surface.nx(); ++i) heights(result.surface.ny() - 1 - j, i) = result.surface(i, j);
+    const std::optional<CellMeans>& cells = d.exported.cells;
+    const ImageD irradiance = cells ? cells->histogram.to_image() : d.fitted.histogram.to_image();
+    const ImageD target_img = cells ? target_image_of(cells->target) : target_image_of(d.fitted.target);
 
+    // Keep catching Ctrl-C until the results are written: a second one must not leave
+    // half-written files (each file is written atomically, but the set should be whole).
     if (!quiet) status.show("writing the results");
-    write_design_outputs(a.out, m, csv.str(), heights, irradiance, target_img, fab);
+    write_design_outputs(a.out, m, io::convergence_csv(d.result), d.result.surface, irradiance, target_img,
+                         d.exported.fabrication.mesh);
     status.finish();
-    print_design_summary(result, m, cells, fab.triangles.size(), {error, totals.energy()}, error_held_out,
-                         error_exported, a.out);
+    print_design_summary(d, m, a.out);
     std::signal(SIGINT, SIG_DFL);
-    return result.stopped_early ? 130 : 0;
+    return d.result.stopped_early ? 130 : 0;
 }
 
 

@@ -1,8 +1,15 @@
 #pragma once
-// Umbrella header of the io module: every file format freeform reads or writes.
+// Umbrella header of the io module: every file freeform reads or writes — scene files,
+// target images and fonts, PNG/PFM images, height maps, OBJ/STL meshes, the JSON of a
+// design's report — and the staged writing of a result folder.
 // Consumers link libstb (pkg-config `stb`), which provides the stb implementations.
 #include "io/file.hpp"
 #include "io/font.hpp"
+#include "io/heightmap.hpp"
 #include "io/image.hpp"
 #include "io/mesh.hpp"
 #include "io/pfm.hpp"
+#include "io/report_json.hpp"
+#include "io/scene_file.hpp"
+#include "io/staged_output.hpp"
+#include "io/target.hpp"

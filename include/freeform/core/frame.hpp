@@ -7,8 +7,8 @@
 #include <cmath>
 #include <string>
 
-#include "../core/error.hpp"
-#include "../core/math.hpp"
+#include "error.hpp"
+#include "math.hpp"
 
 namespace freeform {
 

@@ -7,7 +7,7 @@
 // stage by stage (coarse shape first, then detail). Between levels the surface is
 // refined so that it keeps its shading normals (surface/refine.hpp), which preserves
 // its light better than bilinear interpolation of the heights. Each stage is one
-// annealing run of the generic annealer on a ReflectorProblem; its initial temperature
+// annealing run of the generic annealer on a SurfaceProblem; its initial temperature
 // is calibrated from the
 // objective changes of a few trial moves so that about `initial_acceptance` of uphill
 // moves are accepted at the start, which keeps the defaults meaningful for any scene.
@@ -18,6 +18,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -173,6 +174,13 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene) {
     return levels;
 }
 
+// The final mesh: the scene's, or the designer's plan's last level when it is "auto".
+inline std::pair<int, int> final_mesh(const Scene& scene) {
+    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
+    const auto levels = plan_levels(scene);
+    return {levels.back().mesh_x, levels.back().mesh_y};
+}
+
 // The rays per receiver cell a design fits its final level to: the light's own, raised
 // so that every cell of the final mesh (nx × ny vertices) has at least
 // optimise.min_rays_per_mesh_cell rays on average (32 by default). A mesh with few rays
@@ -278,7 +286,7 @@ inline ProposalSettings proposals_for(const DesignOptions& o, int support, const
     p.min_shift_cells = o.min_shift_cells;
     if (!o.single_vertex) {
         auto bank = default_kernel_bank(std::max(3, support | 1));
-        if (o.kernel_shapes == "isotropic") bank.resize(1);  // the reference's single-kernel baseline
+        if (o.kernel_shapes == KernelShapes::isotropic) bank.resize(1);  // the reference's single-kernel baseline
         if (kept.empty() || bank.size() == 1) {
             p.bank = bank;
         } else {
@@ -353,386 +361,486 @@ Calibration calibrate(Problem& problem, std::uint64_t seed, double p, bool timed
 
 namespace design_detail {
 
+// Seconds since a design started.
+struct DesignClock {
+    std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+    double operator()() const {
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+};
+
+// The annealer's hooks during one stage: progress reports to the caller, held-out checks,
+// and, with replicas, the exchanges and merges (replicas.hpp).
+template <class Problem, class Callback, class Replicas>
+struct StageHooks {
+    Problem* problem;
+    std::vector<ConvergencePoint>* convergence;
+    Callback* user;
+    DesignProgress info;
+    std::int64_t base;
+    const DesignClock* clock;
+    double budget;
+    bool stopped = false;
+    Replicas* replicas = nullptr;  // set when replicas are active
+    double stage_deadline = 0;     // seconds since the design started; 0 = none
+    double target = 0;             // target error; 0 = none
+    HeldOutCheck* held_out = nullptr;  // set when held-out checks are on
+    HeldOutBest* held_best = nullptr;
+    std::int64_t next_check = 0;
+    // Replicas sharing one surface: the heights of the last merge, and when.
+    std::vector<float> merge_base = {};
+    std::int64_t merged_at = 0;
+    std::int64_t merges = 0;
+    std::int64_t merge_every = 0;
+    // Held-out checks at the first sync point past each interval: sync points are fixed
+    // iterations, so the checks do not change the run's course. Replicas that share a
+    // surface check only merged states (the same on every replica), at merges.
+    void batch(const BatchStats& b) {
+        if (!held_out || b.iteration < next_check || (replicas && replicas->shares_surface())) return;
+        check_held_out(b.iteration);
+    }
+    void check_held_out(std::int64_t iteration) {
+        held_best->offer(problem->surface(), (*held_out)(problem->surface()), iteration);
+        next_check = iteration + held_out->interval();
+    }
+    // Every replica's changes since the last merge, on every replica.
+    void merge(std::int64_t iteration, bool check = true) {
+        std::vector<float> h = problem->surface().heights();
+        replicas->merge(h, merge_base);
+        problem->replace_heights(h);
+        merge_base = problem->surface().heights();
+        merged_at = iteration;
+        ++merges;
+        if (check && held_out && iteration >= next_check) check_held_out(iteration);
+    }
+    bool exchange(AnnealExchange& x) {
+        if (!replicas) return false;
+        ReplicaExchange r;
+        r.energy = x.state.energy;
+        r.best_energy = x.state.best_energy;
+        r.temperature = x.state.temperature;
+        r.temperature_scale = x.temperature_scale;
+        r.local_stop = stopped || (stage_deadline > 0 && (*clock)() >= stage_deadline) ||
+                       (target > 0 && x.state.best_energy <= target);
+        const bool stop_all = replicas->exchange(r);
+        x.temperature_scale = r.temperature_scale;
+        if (replicas->shares_surface() && (stop_all || x.state.iteration - merged_at >= merge_every)) {
+            merge(x.state.iteration);
+            x.state_replaced = true;
+        }
+        return stop_all;
+    }
+    bool progress(const AnnealState& s) {
+        const ObjectiveValue& v = problem->value();
+        const double now = (*clock)();
+        convergence->push_back({now, base + s.iteration, info.level, info.stage, v.error, v.energy, v.total,
+                                s.temperature});
+        info.iteration = base + s.iteration;
+        info.temperature = s.temperature;
+        info.error = v.error;
+        info.energy = v.energy;
+        info.objective = v.total;
+        info.iterations_per_second = s.iterations_per_second;
+        info.seconds = now;
+        info.time_left = budget > 0 ? std::max(0.0, budget - now) : 0.0;
+        if ((*user)(info)) stopped = true;
+        // With replicas, a stop is taken at the next exchange point, by all.
+        return replicas ? false : stopped;
+    }
+};
+
+// What every stage of one level shares: its receiver, rays and physics, the move
+// amplitude unit, and the held-out check of its rays.
+struct LevelSetup {
+    std::size_t index = 0;
+    const LevelPlan* plan = nullptr;
+    Receiver receiver;
+    Light light;
+    RaySet rays;
+    PathParams params;
+    double unit = 1;
+    std::optional<HeldOutCheck> held_out;
+    std::size_t stages = 1;
+};
+
+// The multi-level schedule of one design (docs/architecture.md, "The path of a scene
+// through a design"): schedule and start, then per level its stages (the first one
+// after the history bandit's pre-process), then the result. A stopped design is
+// evaluated on the final mesh.
+template <class Backend, class Callback, class Replicas>
+class Designer {
+  public:
+    using Problem = BasicSurfaceProblem<Backend>;
+    using Hooks = StageHooks<Problem, std::remove_reference_t<Callback>, Replicas>;
+
+    Designer(const Scene& scene, const ImageD& target_image, const DesignOptions& options, Callback& callback,
+             const Penalties& penalties, Replicas& replicas)
+        : scene_(scene), target_image_(target_image), options_(options), callback_(callback), penalties_(penalties),
+          replicas_(replicas),
+          // An iteration cap, or no time budget, makes a run reproducible bit for bit:
+          // nothing may then depend on measured time (see calibrate()). Otherwise the run
+          // is timed: its calibrations are cut short by slow moves and its stages' budgets
+          // fit the speed.
+          timed_(options.time_budget > 0 && options.max_iterations == 0),
+          weights_{options.sobel_weight, options.energy_threshold, options.lost_light_weight} {}
+
+    DesignResult run(Heightmap initial) {
+        schedule(std::move(initial));
+        for (std::size_t li = 0; li < levels_.size() && !stop_; ++li) run_level(li);
+        // The milling tool's constraint, made exact: what a ball of the tool's radius
+        // leaves (result.irradiance and value describe the surface before this cut;
+        // finish_design traces the cut surface again for every figure it reports).
+        if (scene_.surface.tool_radius > 0) result_.tool_cut = cut_with_ball(surface_, scene_.surface.tool_radius);
+        result_.surface = std::move(surface_);
+        result_.iterations = total_iterations_;
+        result_.seconds = clock_();
+        return std::move(result_);
+    }
+
+  private:
+    // The levels, the start, and the levels the start leaves to run.
+    void schedule(Heightmap initial) {
+        Scene planned = scene_;
+        planned.optimise = options_;
+        levels_ = options_.levels.empty() ? plan_levels(planned) : options_.levels;
+        threads_ = thread_count(exec::omp_t{options_.threads});
+        // Where to start and which of the planned levels that start still needs, computed
+        // once: with replicas, one computes it and hands it to the others (replicas.hpp).
+        const int planned_count = int(levels_.size());
+        SharedStart start = replicas_.share_start(
+            [&] { return prepare_start(scene_, std::move(initial), target_image_, options_, levels_, threads_); });
+        result_.start = start.report;
+        if (start.skip > 0) {
+            // The schedule goes on as planned from the first level kept (its kernels too:
+            // the large ones of the coarse levels would only re-shape what the start has).
+            levels_.erase(levels_.begin(), levels_.begin() + start.skip);
+            assign_time_shares(levels_);
+        }
+        for (std::size_t k = 0; k < levels_.size(); ++k)
+            if (levels_[k].kernel_supports.empty()) levels_[k].kernel_supports = level_kernel_supports(levels_, k);
+        result_.start.levels_planned = planned_count;
+        result_.start.levels_used = int(levels_.size());
+        // From a transport start the annealer refines: moves shift light by at most
+        // refine_max_shift_cells and start colder (refine_initial_acceptance), so that its
+        // first, hottest iterations do not undo the layout the start already has.
+        moves_ = options_;
+        if (start.transport) {
+            moves_.max_shift_cells = std::min(options_.max_shift_cells, options_.refine_max_shift_cells);
+            moves_.min_shift_cells = std::min(options_.min_shift_cells, moves_.max_shift_cells);
+            moves_.initial_acceptance = std::min(options_.initial_acceptance, options_.refine_initial_acceptance);
+        }
+        surface_ = std::move(start.surface);
+    }
+
+    void run_level(std::size_t li) {
+        LevelSetup L;
+        L.index = li;
+        L.plan = &levels_[li];
+        surface_ = refine_preserving_normals(surface_, L.plan->mesh_x, L.plan->mesh_y);
+        L.receiver = scene_.receiver;
+        L.receiver.width = L.plan->resolution_x;
+        L.receiver.height = L.plan->resolution_y;
+        // Coarse levels only shape the light roughly: fewer rays per cell make their moves
+        // cheaper without changing what they can see. The last level uses the light's own.
+        L.light = scene_.light;
+        if (li + 1 < levels_.size() && options_.coarse_rays_per_cell > 0 && L.light.rays == 0)
+            L.light.rays_per_cell = std::min(L.light.rays_per_cell, options_.coarse_rays_per_cell);
+        L.rays = generate_rays(L.light, surface_, L.receiver, options_.seed);
+        Scene level_scene = scene_;
+        level_scene.receiver = L.receiver;
+        L.params = make_path_params(level_scene);
+        L.unit = amplitude_unit(scene_, L.receiver, surface_);
+        if (options_.held_out_checks)
+            L.held_out.emplace(surface_, L.light, L.receiver, L.params, target_image_, weights_, penalties_,
+                               HeldOutCheck::seed_for(options_.seed, li), threads_);
+        L.stages = L.plan->kernel_supports.empty() ? 1 : L.plan->kernel_supports.size();
+        for (std::size_t si = 0; si < L.stages && !stop_; ++si) run_stage(L, si);
+        share_used_ += L.plan->time_share;
+        if (stop_ && li + 1 < levels_.size()) evaluate_on_final_mesh();
+    }
+
+    Problem make_problem(const LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
+        return Problem(surface_, L.rays, L.params,
+                       make_target(target_image_, L.receiver.width, L.receiver.height, target_total(L.rays, L.params)),
+                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0);
+    }
+
+    // The history bandit's pre-process (reference §4.3.2): a short run with every shape
+    // equally likely, then only the shapes that paid best are kept.
+    void preprocess(const LevelSetup& L, int support, std::uint64_t stage_seed) {
+        ProposalSettings all = proposals_for(moves_, support);
+        const int arms = int(all.bank.size());
+        Problem pre = make_problem(L, std::move(all), make_bandit(BanditKind::uniform, arms, options_.bandit_sync));
+        const auto cal = calibrate(pre, hash_combine(stage_seed, 1), moves_.initial_acceptance, timed_);
+        pre.set_reference_temperature(cal.temperature);
+        AnnealOptions po;
+        po.seed = hash_combine(stage_seed, 2);
+        po.initial_temperature = cal.temperature;
+        po.cooling = 1.0;
+        po.max_iterations = options_.preprocess_iterations;
+        po.time_budget = options_.time_budget > 0 ? 0.05 * options_.time_budget : 0;
+        po.threads = 1;
+        const AnnealResult pr = anneal(pre, po);
+        total_iterations_ += pr.iterations;
+        result_.accepted += pr.accepted;
+        std::vector<double> rate(std::size_t(arms), 0.0);
+        for (int a = 0; a < arms; ++a) {
+            const auto pulls = pre.bandit().pulls()[std::size_t(a)];
+            rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
+        }
+        kept_arms_ = HistoryBandit::preselect(rate, std::min(options_.preprocess_keep, arms));
+        std::sort(kept_arms_.begin(), kept_arms_.end());
+        result_.preprocess_rates = rate;
+    }
+
+    bool wants_preprocess(std::size_t li, std::size_t si) const {
+        return li == 0 && si == 0 && options_.bandit == BanditKind::history && !options_.single_vertex &&
+               options_.kernel_shapes != KernelShapes::isotropic && options_.preprocess_iterations > 0 &&
+               options_.preprocess_keep > 0;
+    }
+
+    // The stage's iteration budget: with a time budget and no iteration cap, as many
+    // iterations as the measured speed fits in the stage's time (so that the temperature
+    // schedule completes); otherwise the plan's, which makes the run reproducible.
+    std::int64_t stage_budget(const LevelSetup& L, std::size_t si, double moves_per_second, double stage_time,
+                              int speculative) const {
+        const std::size_t li = L.index;
+        const double level_share = L.plan->time_share;
+        std::int64_t budget = std::max<std::int64_t>(1, L.plan->iterations / std::int64_t(L.stages));
+        if (timed_) {
+            const double parallel = 1.0 + 0.6 * (std::min(speculative, threads_) - 1);
+            budget = std::max<std::int64_t>(500, std::int64_t(0.9 * moves_per_second * parallel * stage_time));
+        }
+        if (options_.max_iterations > 0) {
+            // The cap is shared by every stage still to run, in proportion to the levels'
+            // time shares, so that no level is starved by an earlier one.
+            double remaining_share = level_share / double(L.stages);
+            for (std::size_t lk = li + 1; lk < levels_.size(); ++lk) remaining_share += levels_[lk].time_share;
+            remaining_share += level_share * double(L.stages - si - 1) / double(L.stages);
+            const std::int64_t left = options_.max_iterations - total_iterations_;
+            const double mine = remaining_share > 0 ? (level_share / double(L.stages)) / remaining_share : 1.0;
+            budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
+        }
+        return replicas_.common_budget(budget);
+    }
+
+    AnnealOptions stage_options(const LevelSetup& L, std::size_t si, int support, std::uint64_t stage_seed, double t0,
+                                double moves_per_second, double stage_time, bool last) const {
+        AnnealOptions ao;
+        ao.seed = replicas_.anneal_seed(stage_seed);
+        ao.initial_temperature = t0;
+        ao.cooling = options_.cooling;
+        const int speculative = options_.speculative > 0 ? options_.speculative : threads_;
+        const std::int64_t budget = stage_budget(L, si, moves_per_second, stage_time, speculative);
+        ao.max_iterations = budget;
+        ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options_.temperature_steps));
+        // The last stage of a time-budgeted run goes on until the time is up: its budget,
+        // fitted to the speed the calibration measured, often runs out first (letter E,
+        // 20 s: at 17.9 s), and the schedule simply cools on past it.
+        if (timed_ && last) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
+        ao.patience = std::max<std::int64_t>(100, std::int64_t(options_.patience_fraction * double(budget)));
+        ao.reheat_factor = options_.reheat_factor;
+        ao.time_budget = options_.time_budget > 0 ? stage_time : 0;
+        if (options_.target_error > 0) ao.target_energy = options_.target_error;
+        ao.speculative = speculative;
+        ao.threads = threads_;
+        ao.progress_every = std::max<std::int64_t>(1, options_.progress_every);
+        if (replicas_.active()) {
+            // Every stop that could differ between replicas is decided together at the
+            // exchange points (replicas.hpp); the annealer itself stops only at the common
+            // iteration budget.
+            ao.time_budget = 0;
+            ao.target_energy = std::numeric_limits<double>::quiet_NaN();
+            ao.temperature_scale = replicas_.stage_temperature_scale();
+            ao.exchange_every =
+                std::max<std::int64_t>(1, replicas_.exchange_every(L.plan->mesh_x, L.plan->mesh_y, support));
+        }
+        return ao;
+    }
+
+    Hooks stage_hooks(Problem& problem, const LevelSetup& L, std::size_t si, const StageReport& report,
+                      HeldOutCheck* held_out, HeldOutBest& held_best, int support, double stage_time) {
+        Hooks hooks{&problem, &result_.convergence, &callback_, {}, total_iterations_, &clock_, options_.time_budget};
+        hooks.info.level = int(L.index);
+        hooks.info.levels = int(levels_.size());
+        hooks.info.stage = int(si);
+        hooks.info.stages = int(L.stages);
+        hooks.info.mesh = std::max(L.plan->mesh_x, L.plan->mesh_y);
+        hooks.info.resolution = std::max(L.receiver.width, L.receiver.height);
+        hooks.info.kernel_support = report.kernel_support;
+        if (held_out) {
+            hooks.held_out = held_out;
+            hooks.held_best = &held_best;
+            hooks.next_check = held_out->interval();
+        }
+        if (replicas_.active()) {
+            hooks.replicas = &replicas_;
+            hooks.stage_deadline = options_.time_budget > 0 ? clock_() + stage_time : 0;
+            hooks.target = options_.target_error;
+            if (replicas_.shares_surface()) {
+                hooks.merge_base = surface_.heights();
+                hooks.merge_every = replicas_.merge_every(L.plan->mesh_x, L.plan->mesh_y, support);
+            }
+        }
+        return hooks;
+    }
+
+    StageReport stage_report_start(const LevelSetup& L, int support, double t0, const Problem& problem) const {
+        StageReport report;
+        report.level = int(L.index);
+        report.mesh_x = L.plan->mesh_x;
+        report.mesh_y = L.plan->mesh_y;
+        report.resolution_x = L.receiver.width;
+        report.resolution_y = L.receiver.height;
+        report.kernel_support = options_.single_vertex ? 1 : support;
+        report.initial_temperature = t0;
+        report.error_start = problem.value().error;
+        report.rays = L.rays.size();
+        return report;
+    }
+
+    void run_stage(LevelSetup& L, std::size_t si) {
+        const std::size_t li = L.index;
+        const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports[si];
+        const std::uint64_t stage_seed = hash_combine(options_.seed, li * 16 + si);
+        const bool last = li + 1 == levels_.size() && si + 1 == L.stages;  // the design's last stage
+        if (wants_preprocess(li, si)) preprocess(L, support, stage_seed);
+        ProposalSettings ps = proposals_for(moves_, support, kept_arms_);
+        const int arms = std::max<int>(1, int(ps.bank.size()));
+        Problem problem = make_problem(L, ps, make_bandit(options_.bandit, arms, options_.bandit_sync));
+        const Calibration cal = calibrate(problem, stage_seed, moves_.initial_acceptance, timed_);
+        // Identity for one replica.
+        const double t0 = replicas_.common_temperature(cal.temperature * options_.initial_temperature_scale);
+        problem.set_reference_temperature(t0);
+        // Replicas that share one surface each move their own strip of it (after the
+        // calibration, which every replica makes on the whole surface alike).
+        if (replicas_.shares_surface()) {
+            const auto [j0, j1] = replicas_.centre_rows(surface_.ny());
+            problem.set_centre_rows(j0, j1);
+        }
+        StageReport report = stage_report_start(L, support, t0, problem);
+        HeldOutCheck* held_out = L.held_out ? &*L.held_out : nullptr;
+        HeldOutBest held_best;
+        if (held_out) {
+            const ObjectiveValue v = (*held_out)(surface_);
+            held_best.offer(surface_, v, 0);
+            report.held_out_start = v.error;
+        }
+        // Time: this stage's share of what is left of this level's share.
+        const double level_end = options_.time_budget * (share_used_ + L.plan->time_share);
+        const double stage_time = std::max(0.05, (level_end - clock_()) / double(L.stages - si));
+        const AnnealOptions ao =
+            stage_options(L, si, support, stage_seed, t0, cal.moves_per_second, stage_time, last);
+        const auto stage_start = clock_();
+        Hooks hooks = stage_hooks(problem, L, si, report, held_out, held_best, support, stage_time);
+        const AnnealResult ar = anneal(problem, ao, hooks);
+        // Sharing replicas end the stage on one surface: each holds its best since the last
+        // merge, and these are merged (unless nothing ran since; every replica ran the same
+        // iterations, so all decide alike).
+        if (replicas_.shares_surface() && hooks.merged_at != ar.iterations)
+            hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
+        report.merges = hooks.merges;
+        if (held_out) {
+            // The annealer ends holding its best state on the fitted rays; a state the
+            // held-out rays judged better replaces it.
+            if (!held_best.offer(surface_, (*held_out)(surface_), ar.iterations)) {
+                problem.replace_heights(held_best.heights);
+                report.held_out_kept = held_best.iteration;
+            }
+            report.held_out_end = held_best.value.error;
+            report.held_out_checks = held_best.checks;
+        }
+        end_stage(problem, ar, report, stage_start, hooks.stopped);
+        if (last || stop_) keep_result(problem, ps, report, L, held_out, held_best);
+    }
+
+    void end_stage(const Problem& problem, const AnnealResult& ar, StageReport& report, double stage_start,
+                   bool stopped) {
+        total_iterations_ += ar.iterations;
+        result_.accepted += ar.accepted;
+        report.iterations = ar.iterations;
+        report.accepted = ar.accepted;
+        report.proposals_evaluated = ar.proposals_evaluated;
+        report.seconds = clock_() - stage_start;
+        report.error_end = problem.value().error;
+        report.energy_end = problem.value().energy;
+        report.objective_end = problem.value().total;
+        report.bandit_weights = options_.single_vertex ? std::vector<double>{} : problem.bandit().weights();
+        report.stop_reason = to_string(ar.reason);
+        result_.stages.push_back(report);
+        // With replicas, every replica goes on to the next stage, or none does.
+        result_.stopped_early = replicas_.any(stopped);
+        stop_ = replicas_.any(stopped || (options_.target_error > 0 && problem.value().total <= options_.target_error));
+    }
+
+    void keep_result(const Problem& problem, const ProposalSettings& ps, const StageReport& report,
+                     const LevelSetup& L, const HeldOutCheck* held_out, const HeldOutBest& held_best) {
+        result_.irradiance = problem.histogram();
+        result_.target = problem.image().target();
+        result_.value = problem.value();
+        result_.kernel_bank = ps.bank;
+        result_.bandit_weights = report.bandit_weights;
+        result_.rays = L.rays.size();
+        if (held_out) result_.held_out = held_best.value, result_.held_out_seed = held_out->seed();
+    }
+
+    // Stopped early: the surface is at this level's mesh; refine it to the final mesh so
+    // that exports have the size the user asked for, and evaluate it there, so that the
+    // result's irradiance, target and value describe it.
+    void evaluate_on_final_mesh() {
+        const LevelPlan& final_level = levels_.back();
+        surface_ = refine_preserving_normals(surface_, final_level.mesh_x, final_level.mesh_y);
+        Receiver receiver = scene_.receiver;
+        receiver.width = final_level.resolution_x;
+        receiver.height = final_level.resolution_y;
+        Scene final_scene = scene_;
+        final_scene.receiver = receiver;
+        const RaySet rays = generate_rays(scene_.light, surface_, receiver, options_.seed);
+        const ProposalSettings ps = proposals_for(options_, 5, kept_arms_);
+        const PathParams final_pp = make_path_params(final_scene);
+        Problem final_state(surface_, rays, final_pp,
+                            make_target(target_image_, receiver.width, receiver.height, target_total(rays, final_pp)),
+                            weights_, penalties_, ps, make_bandit(BanditKind::uniform, std::max<int>(1, int(ps.bank.size()))),
+                            1.0, 1.0);
+        result_.irradiance = final_state.histogram();
+        result_.target = final_state.image().target();
+        result_.value = final_state.value();
+        result_.rays = rays.size();
+        if (options_.held_out_checks) {
+            // ... and on the final level's held-out rays.
+            HeldOutCheck check(surface_, scene_.light, receiver, final_pp, target_image_, weights_, penalties_,
+                               HeldOutCheck::seed_for(options_.seed, levels_.size() - 1), threads_);
+            result_.held_out = check(surface_);
+            result_.held_out_seed = check.seed();
+        }
+    }
+
+    const Scene& scene_;
+    const ImageD& target_image_;
+    const DesignOptions& options_;
+    std::remove_reference_t<Callback>& callback_;
+    const Penalties& penalties_;
+    Replicas& replicas_;
+    DesignClock clock_;
+    bool timed_;
+    ObjectiveWeights weights_;
+    std::vector<LevelPlan> levels_;
+    int threads_ = 1;
+    DesignOptions moves_;  // the options the moves are made with (colder from a transport start)
+    Heightmap surface_;
+    DesignResult result_;
+    std::int64_t total_iterations_ = 0;
+    double share_used_ = 0;
+    bool stop_ = false;
+    std::vector<int> kept_arms_;  // after the history bandit's pre-process
+};
+
 template <class Backend, class Callback, class Replicas>
 DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
                          const DesignOptions& options, Callback&& callback, const Penalties& penalties,
                          Replicas& replicas) {
-    using Problem = BasicReflectorProblem<Backend>;
-    using clock = std::chrono::steady_clock;
-    const auto t_start = clock::now();
-    const auto elapsed = [&] { return std::chrono::duration<double>(clock::now() - t_start).count(); };
-    // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
-    // may then depend on measured time (see calibrate()). Otherwise the run is timed: its
-    // calibrations are cut short by slow moves and its stages' budgets fit the speed.
-    const bool timed = options.time_budget > 0 && options.max_iterations == 0;
-    const ObjectiveWeights weights{options.sobel_weight, options.energy_threshold, options.lost_light_weight};
-
-    Scene planned = scene;
-    planned.optimise = options;
-    std::vector<LevelPlan> levels = options.levels.empty() ? plan_levels(planned) : options.levels;
-    const int threads = thread_count(exec::omp_t{options.threads});
-    DesignResult result;
-
-    // Where to start and which of the planned levels that start still needs, computed
-    // once: with replicas, one computes it and hands it to the others (replicas.hpp).
-    const int planned_count = int(levels.size());
-    SharedStart start = replicas.share_start(
-        [&] { return prepare_start(scene, std::move(initial), target_image, options, levels, threads); });
-    result.start = start.report;
-    if (start.skip > 0) {
-        // The schedule goes on as planned from the first level kept (its kernels too:
-        // the large ones of the coarse levels would only re-shape what the start has).
-        levels.erase(levels.begin(), levels.begin() + start.skip);
-        assign_time_shares(levels);
-    }
-    for (std::size_t k = 0; k < levels.size(); ++k)
-        if (levels[k].kernel_supports.empty())
-            levels[k].kernel_supports = level_kernel_supports(levels, k);
-    result.start.levels_planned = planned_count;
-    result.start.levels_used = int(levels.size());
-    // From a transport start the annealer refines: moves shift light by at most
-    // refine_max_shift_cells and start colder (refine_initial_acceptance), so that its
-    // first, hottest iterations do not undo the layout the start already has.
-    DesignOptions moves = options;
-    if (start.transport) {
-        moves.max_shift_cells = std::min(options.max_shift_cells, options.refine_max_shift_cells);
-        moves.min_shift_cells = std::min(options.min_shift_cells, moves.max_shift_cells);
-        moves.initial_acceptance = std::min(options.initial_acceptance, options.refine_initial_acceptance);
-    }
-    Heightmap surface = std::move(start.surface);
-    std::int64_t total_iterations = 0;
-    double share_used = 0;
-    bool stop = false;
-    std::vector<int> kept_arms;  // after the history bandit's pre-process
-
-    for (std::size_t li = 0; li < levels.size() && !stop; ++li) {
-        const LevelPlan& level = levels[li];
-        surface = refine_preserving_normals(surface, level.mesh_x, level.mesh_y);
-        Receiver receiver = scene.receiver;
-        receiver.width = level.resolution_x;
-        receiver.height = level.resolution_y;
-        // Coarse levels only shape the light roughly: fewer rays per cell make their moves
-        // cheaper without changing what they can see. The last level uses the light's own.
-        Light light = scene.light;
-        if (li + 1 < levels.size() && options.coarse_rays_per_cell > 0 && light.rays == 0)
-            light.rays_per_cell = std::min(light.rays_per_cell, options.coarse_rays_per_cell);
-        const RaySet rays = generate_rays(light, surface, receiver, options.seed);
-        Scene level_scene = scene;
-        level_scene.receiver = receiver;
-        const PathParams pp = make_path_params(level_scene);
-        const double unit = design_detail::amplitude_unit(scene, receiver, surface);
-        std::optional<HeldOutCheck> held_out;
-        if (options.held_out_checks)
-            held_out.emplace(surface, light, receiver, pp, target_image, weights, penalties,
-                             HeldOutCheck::seed_for(options.seed, li), threads);
-
-        const std::size_t stages = level.kernel_supports.empty() ? 1 : level.kernel_supports.size();
-        const double level_share = level.time_share;
-        for (std::size_t si = 0; si < stages && !stop; ++si) {
-            const int support = level.kernel_supports.empty() ? 3 : level.kernel_supports[si];
-            const std::uint64_t stage_seed = hash_combine(options.seed, li * 16 + si);
-            const bool last = li + 1 == levels.size() && si + 1 == stages;  // the design's last stage
-            // The history bandit's pre-process (reference §4.3.2): a short run with every
-            // shape equally likely, then only the shapes that paid best are kept.
-            if (li == 0 && si == 0 && options.bandit == "history" && !options.single_vertex &&
-                options.kernel_shapes != "isotropic" &&
-                options.preprocess_iterations > 0 && options.preprocess_keep > 0) {
-                ProposalSettings all = design_detail::proposals_for(moves, support);
-                const int arms = int(all.bank.size());
-                Problem pre(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, target_total(rays, pp)),
-                                     weights, penalties, all, make_bandit("uniform", arms, options.bandit_sync), unit, 1.0);
-                const auto cal = design_detail::calibrate(pre, hash_combine(stage_seed, 1), moves.initial_acceptance,
-                                                    timed);
-                pre.set_reference_temperature(cal.temperature);
-                AnnealOptions po;
-                po.seed = hash_combine(stage_seed, 2);
-                po.initial_temperature = cal.temperature;
-                po.cooling = 1.0;
-                po.max_iterations = options.preprocess_iterations;
-                po.time_budget = options.time_budget > 0 ? 0.05 * options.time_budget : 0;
-                po.threads = 1;
-                const AnnealResult pr = anneal(pre, po);
-                total_iterations += pr.iterations;
-                result.accepted += pr.accepted;
-                std::vector<double> rate(std::size_t(arms), 0.0);
-                for (int a = 0; a < arms; ++a) {
-                    const auto pulls = pre.bandit().pulls()[std::size_t(a)];
-                    rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
-                }
-                kept_arms = HistoryBandit::preselect(rate, std::min(options.preprocess_keep, arms));
-                std::sort(kept_arms.begin(), kept_arms.end());
-                result.preprocess_rates = rate;
-            }
-            ProposalSettings ps = design_detail::proposals_for(moves, support, kept_arms);
-            const int arms = std::max<int>(1, int(ps.bank.size()));
-            Problem problem(surface, rays, pp, make_target(target_image, receiver.width, receiver.height, target_total(rays, pp)),
-                                     weights, penalties, ps,
-                                     make_bandit(options.bandit, arms, options.bandit_sync, "optimise.bandit"), unit, 1.0);
-            const design_detail::Calibration cal = design_detail::calibrate(problem, stage_seed, moves.initial_acceptance,
-                                                                                  timed);
-            const double t0 = replicas.common_temperature(cal.temperature * options.initial_temperature_scale);  // identity for one replica
-            problem.set_reference_temperature(t0);
-            // Replicas that share one surface each move their own strip of it (after the
-            // calibration, which every replica makes on the whole surface alike).
-            if (replicas.shares_surface()) {
-                const auto [j0, j1] = replicas.centre_rows(surface.ny());
-                problem.set_centre_rows(j0, j1);
-            }
-
-            StageReport report;
-            report.level = int(li);
-            report.mesh_x = level.mesh_x;
-            report.mesh_y = level.mesh_y;
-            report.resolution_x = receiver.width;
-            report.resolution_y = receiver.height;
-            report.kernel_support = options.single_vertex ? 1 : support;
-            report.initial_temperature = t0;
-            report.error_start = problem.value().error;
-            report.rays = rays.size();
-            HeldOutBest held_best;
-            if (held_out) {
-                const ObjectiveValue v = (*held_out)(surface);
-                held_best.offer(surface, v, 0);
-                report.held_out_start = v.error;
-            }
-
-            AnnealOptions ao;
-            ao.seed = replicas.anneal_seed(stage_seed);
-            ao.initial_temperature = t0;
-            ao.cooling = options.cooling;
-            // Time: this stage's share of what is left of this level's share.
-            const double level_end = options.time_budget * (share_used + level_share);
-            const double stage_time = std::max(0.05, (level_end - elapsed()) / double(stages - si));
-            const int speculative = options.speculative > 0 ? options.speculative : threads;
-            // Iteration budget: with a time budget and no iteration cap, as many iterations
-            // as the measured speed fits in the stage's time (so that the temperature
-            // schedule completes); otherwise the plan's, which makes the run reproducible.
-            std::int64_t budget = std::max<std::int64_t>(1, level.iterations / std::int64_t(stages));
-            if (timed) {
-                const double parallel = 1.0 + 0.6 * (std::min(speculative, threads) - 1);
-                budget = std::max<std::int64_t>(500, std::int64_t(0.9 * cal.moves_per_second * parallel * stage_time));
-            }
-            if (options.max_iterations > 0) {
-                // The cap is shared by every stage still to run, in proportion to the
-                // levels' time shares, so that no level is starved by an earlier one.
-                double remaining_share = level_share / double(stages);
-                for (std::size_t lk = li + 1; lk < levels.size(); ++lk) remaining_share += levels[lk].time_share;
-                remaining_share += level_share * double(stages - si - 1) / double(stages);
-                const std::int64_t left = options.max_iterations - total_iterations;
-                const double mine = remaining_share > 0 ? (level_share / double(stages)) / remaining_share : 1.0;
-                budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
-            }
-            budget = replicas.common_budget(budget);
-            ao.max_iterations = budget;
-            ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options.temperature_steps));
-            // The last stage of a time-budgeted run goes on until the time is up: its
-            // budget, fitted to the speed the calibration measured, often runs out first
-            // (letter E, 20 s: at 17.9 s), and the schedule simply cools on past it.
-            if (timed && last) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
-            ao.patience = std::max<std::int64_t>(100, std::int64_t(options.patience_fraction * double(budget)));
-            ao.reheat_factor = options.reheat_factor;
-            ao.time_budget = options.time_budget > 0 ? stage_time : 0;
-            if (options.target_error > 0) ao.target_energy = options.target_error;
-            ao.speculative = speculative;
-            ao.threads = threads;
-            ao.progress_every = std::max<std::int64_t>(1, options.progress_every);
-            if (replicas.active()) {
-                // Every stop that could differ between replicas is decided together at the
-                // exchange points (replicas.hpp); the annealer itself stops only at the
-                // common iteration budget.
-                ao.time_budget = 0;
-                ao.target_energy = std::numeric_limits<double>::quiet_NaN();
-                ao.temperature_scale = replicas.stage_temperature_scale();
-                ao.exchange_every = std::max<std::int64_t>(1, replicas.exchange_every(level.mesh_x, level.mesh_y, support));
-            }
-
-            const auto stage_start = elapsed();
-            const std::int64_t base_iteration = total_iterations;
-            struct Hooks {
-                Problem* problem;
-                std::vector<ConvergencePoint>* convergence;
-                std::remove_reference_t<Callback>* user;
-                DesignProgress info;
-                std::int64_t base;
-                const decltype(elapsed)* clock;
-                double budget;
-                bool stopped = false;
-                Replicas* replicas = nullptr;  // set when replicas are active
-                double stage_deadline = 0;     // seconds since the design started; 0 = none
-                double target = 0;             // target error; 0 = none
-                HeldOutCheck* held_out = nullptr;  // set when held-out checks are on
-                HeldOutBest* held_best = nullptr;
-                std::int64_t next_check = 0;
-                // Replicas sharing one surface: the heights of the last merge, and when.
-                std::vector<float> merge_base = {};
-                std::int64_t merged_at = 0;
-                std::int64_t merges = 0;
-                std::int64_t merge_every = 0;
-                // Held-out checks at the first sync point past each interval: sync points
-                // are fixed iterations, so the checks do not change the run's course.
-                // Replicas that share a surface check only merged states (the same on
-                // every replica), at merges.
-                void batch(const BatchStats& b) {
-                    if (!held_out || b.iteration < next_check || (replicas && replicas->shares_surface())) return;
-                    check_held_out(b.iteration);
-                }
-                void check_held_out(std::int64_t iteration) {
-                    held_best->offer(problem->surface(), (*held_out)(problem->surface()), iteration);
-                    next_check = iteration + held_out->interval();
-                }
-                // Every replica's changes since the last merge, on every replica.
-                void merge(std::int64_t iteration, bool check = true) {
-                    std::vector<float> h = problem->surface().heights();
-                    replicas->merge(h, merge_base);
-                    problem->replace_heights(h);
-                    merge_base = problem->surface().heights();
-                    merged_at = iteration;
-                    ++merges;
-                    if (check && held_out && iteration >= next_check) check_held_out(iteration);
-                }
-                bool exchange(AnnealExchange& x) {
-                    if (!replicas) return false;
-                    ReplicaExchange r;
-                    r.energy = x.state.energy;
-                    r.best_energy = x.state.best_energy;
-                    r.temperature = x.state.temperature;
-                    r.temperature_scale = x.temperature_scale;
-                    r.local_stop = stopped || (stage_deadline > 0 && (*clock)() >= stage_deadline) ||
-                                   (target > 0 && x.state.best_energy <= target);
-                    const bool stop_all = replicas->exchange(r);
-                    x.temperature_scale = r.temperature_scale;
-                    if (replicas->shares_surface() && (stop_all || x.state.iteration - merged_at >= merge_every)) {
-                        merge(x.state.iteration);
-                        x.state_replaced = true;
-                    }
-                    return stop_all;
-                }
-                bool progress(const AnnealState& s) {
-                    const ObjectiveValue& v = problem->value();
-                    const double now = (*clock)();
-                    convergence->push_back({now, base + s.iteration, info.level, info.stage, v.error, v.energy, v.total,
-                                            s.temperature});
-                    info.iteration = base + s.iteration;
-                    info.temperature = s.temperature;
-                    info.error = v.error;
-                    info.energy = v.energy;
-                    info.objective = v.total;
-                    info.iterations_per_second = s.iterations_per_second;
-                    info.seconds = now;
-                    info.time_left = budget > 0 ? std::max(0.0, budget - now) : 0.0;
-                    if ((*user)(info)) stopped = true;
-                    // With replicas, a stop is taken at the next exchange point, by all.
-                    return replicas ? false : stopped;
-                }
-            };
-            Hooks hooks{&problem, &result.convergence, &callback, {}, base_iteration, &elapsed, options.time_budget};
-            hooks.info.level = int(li);
-            hooks.info.levels = int(levels.size());
-            hooks.info.stage = int(si);
-            hooks.info.stages = int(stages);
-            hooks.info.mesh = std::max(level.mesh_x, level.mesh_y);
-            hooks.info.resolution = std::max(receiver.width, receiver.height);
-            hooks.info.kernel_support = report.kernel_support;
-            if (held_out) {
-                hooks.held_out = &*held_out;
-                hooks.held_best = &held_best;
-                hooks.next_check = held_out->interval();
-            }
-            if (replicas.active()) {
-                hooks.replicas = &replicas;
-                hooks.stage_deadline = options.time_budget > 0 ? elapsed() + stage_time : 0;
-                hooks.target = options.target_error;
-                if (replicas.shares_surface()) {
-                    hooks.merge_base = surface.heights();
-                    hooks.merge_every = replicas.merge_every(level.mesh_x, level.mesh_y, support);
-                }
-            }
-
-            const AnnealResult ar = anneal(problem, ao, hooks);
-            // Sharing replicas end the stage on one surface: each holds its best since the
-            // last merge, and these are merged (unless nothing ran since; every replica
-            // ran the same iterations, so all decide alike).
-            if (replicas.shares_surface() && hooks.merged_at != ar.iterations)
-                hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
-            report.merges = hooks.merges;
-            if (held_out) {
-                // The annealer ends holding its best state on the fitted rays; a state
-                // the held-out rays judged better replaces it.
-                if (!held_best.offer(surface, (*held_out)(surface), ar.iterations)) {
-                    problem.replace_heights(held_best.heights);
-                    report.held_out_kept = held_best.iteration;
-                }
-                report.held_out_end = held_best.value.error;
-                report.held_out_checks = held_best.checks;
-            }
-            total_iterations += ar.iterations;
-            result.accepted += ar.accepted;
-            report.iterations = ar.iterations;
-            report.accepted = ar.accepted;
-            report.proposals_evaluated = ar.proposals_evaluated;
-            report.seconds = elapsed() - stage_start;
-            report.error_end = problem.value().error;
-            report.energy_end = problem.value().energy;
-            report.objective_end = problem.value().total;
-            report.bandit_weights = options.single_vertex ? std::vector<double>{} : problem.bandit().weights();
-            report.stop_reason = to_string(ar.reason);
-            result.stages.push_back(report);
-            // With replicas, every replica goes on to the next stage, or none does.
-            result.stopped_early = replicas.any(hooks.stopped);
-            stop = replicas.any(hooks.stopped ||
-                                (options.target_error > 0 && problem.value().total <= options.target_error));
-
-            if (last || stop) {
-                result.irradiance = problem.histogram();
-                result.target = problem.image().target();
-                result.value = problem.value();
-                result.kernel_bank = ps.bank;
-                result.bandit_weights = report.bandit_weights;
-                result.rays = rays.size();
-                if (held_out) result.held_out = held_best.value, result.held_out_seed = held_out->seed();
-            }
-        }
-        share_used += level_share;
-        if (stop && li + 1 < levels.size()) {
-            // Stopped early: the surface is at this level's mesh; refine it to the final
-            // mesh so that exports have the size the user asked for, and evaluate it
-            // there, so that the result's irradiance, target and value describe it.
-            const LevelPlan& final_level = levels.back();
-            surface = refine_preserving_normals(surface, final_level.mesh_x, final_level.mesh_y);
-            Receiver receiver = scene.receiver;
-            receiver.width = final_level.resolution_x;
-            receiver.height = final_level.resolution_y;
-            Scene final_scene = scene;
-            final_scene.receiver = receiver;
-            const RaySet rays = generate_rays(scene.light, surface, receiver, options.seed);
-            const ProposalSettings ps = design_detail::proposals_for(options, 5, kept_arms);
-            const PathParams final_pp = make_path_params(final_scene);
-            Problem final_state(surface, rays, final_pp,
-                                make_target(target_image, receiver.width, receiver.height, target_total(rays, final_pp)),
-                                weights,
-                                penalties, ps, make_bandit("uniform", std::max<int>(1, int(ps.bank.size()))), 1.0,
-                                1.0);
-            result.irradiance = final_state.histogram();
-            result.target = final_state.image().target();
-            result.value = final_state.value();
-            result.rays = rays.size();
-            if (options.held_out_checks) {
-                // ... and on the final level's held-out rays.
-                HeldOutCheck check(surface, scene.light, receiver, final_pp, target_image, weights, penalties,
-                                   HeldOutCheck::seed_for(options.seed, levels.size() - 1), threads);
-                result.held_out = check(surface);
-                result.held_out_seed = check.seed();
-            }
-        }
-    }
-    // The milling tool's constraint, made exact: what a ball of the tool's radius leaves
-    // (result.irradiance and value describe the surface before this cut; the CLI traces
-    // the cut surface again for every figure it reports).
-    if (scene.surface.tool_radius > 0) result.tool_cut = cut_with_ball(surface, scene.surface.tool_radius);
-    result.surface = std::move(surface);
-    result.iterations = total_iterations;
-    result.seconds = elapsed();
-    return result;
+    Designer<Backend, Callback, Replicas> designer(scene, target_image, options, callback, penalties, replicas);
+    return designer.run(std::move(initial));
 }
 
 }  // namespace design_detail
@@ -749,7 +857,7 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 template <class Callback, ReplicaCoordinator Replicas>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback, const Penalties& penalties, Replicas& replicas) {
-    if (options.evaluation == "full")
+    if (options.evaluation == EvaluationMode::full)
         return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
                                                               std::forward<Callback>(callback), penalties, replicas);
     return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,

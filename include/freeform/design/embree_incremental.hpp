@@ -6,9 +6,9 @@
 // affected rays, then puts the heights back and refits again. The state after delta()
 // is the state before it, bit for bit, but the heights are briefly shared, so deltas
 // are evaluated one at a time (no speculative parallelism with this backend).
-#include "../design/problem.hpp"
-#include "embree.hpp"
-#include "incremental.hpp"
+#include "../trace/embree.hpp"
+#include "../trace/incremental.hpp"
+#include "problem.hpp"
 
 namespace freeform {
 
@@ -40,6 +40,6 @@ struct EmbreeBackend {
     void committed(const Patch& p) { tracer->surface_changed(p); }
 };
 
-using EmbreeReflectorProblem = BasicReflectorProblem<EmbreeBackend>;
+using EmbreeSurfaceProblem = BasicSurfaceProblem<EmbreeBackend>;
 
 }  // namespace freeform

@@ -1,6 +1,7 @@
 #pragma once
-// The reflector / lens design problem, in the form the generic annealer expects
-// (anneal/annealer.hpp): energy(), propose(), delta(), accept(), reject().
+// The design problem over a surface of any material (mirror or lens), in the form the
+// generic annealer expects (anneal/annealer.hpp): energy(), propose(), delta(), accept(),
+// reject().
 //
 // A move is a Gaussian kernel (picked by a bandit from a bank) added at a vertex, held in
 // an overlay; delta() retraces only the rays the move can affect (trace/incremental.hpp)
@@ -35,7 +36,7 @@ struct ProposalSettings {
 
 // How a problem retraces the rays a move can affect. The height-field backend traces
 // against "surface + overlay" through an OverlayView: delta() changes nothing, so
-// several deltas can run at once. Other backends (Embree, trace/embree_incremental.hpp)
+// several deltas can run at once. Other backends (Embree, design/embree_incremental.hpp)
 // must show the move to their acceleration structure first: they apply it, retrace and
 // restore, so their deltas run one at a time.
 struct HeightfieldBackend {
@@ -62,8 +63,11 @@ struct FullRetraceBackend {
     void committed(const Patch&) {}
 };
 
+// The surface, its rays and target, the objective's terms and the moves; Backend is how
+// a move's rays are retraced (HeightfieldBackend, FullRetraceBackend, or EmbreeBackend in
+// design/embree_incremental.hpp).
 template <class Backend = HeightfieldBackend>
-class BasicReflectorProblem {
+class BasicSurfaceProblem {
 public:
     // Deltas may run concurrently only when the backend allows it (anneal/annealer.hpp).
     static constexpr bool concurrent_deltas = Backend::concurrent_deltas;
@@ -82,7 +86,7 @@ public:
     // `metres_per_cell_shift`: the height amplitude that moves the light by one receiver
     // cell per grid unit of kernel width (see design/designer.hpp). `reference_temperature`
     // scales amplitudes with temperature.
-    BasicReflectorProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
+    BasicSurfaceProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
                           ObjectiveWeights weights, const Penalties& penalties, ProposalSettings proposals,
                           AnyBandit bandit, double metres_per_cell_shift, double reference_temperature,
                           Backend backend = {})
@@ -274,6 +278,6 @@ private:
     int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
 };
 
-using ReflectorProblem = BasicReflectorProblem<HeightfieldBackend>;
+using SurfaceProblem = BasicSurfaceProblem<HeightfieldBackend>;
 
 }  // namespace freeform

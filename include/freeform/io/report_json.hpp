@@ -1,15 +1,22 @@
-// JSON for what the designer reports: one object per annealing stage (level, model,
-// work done, temperatures, errors, why it stopped, the bandit's weights). Used by the
-// command line's metrics.json and by the study's result files, so both read alike.
+// JSON for what a design reports: one object per annealing stage (level, model, work
+// done, temperatures, errors, why it stopped, the bandit's weights), the start, where the
+// light went, the cell means, the machinist's figures, and a whole design's metrics.json
+// (docs/measures.md says what each figure is). Used by the command line and by the
+// study's result files, so both read alike.
 #pragma once
 
+#include <cstddef>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
-#include <freeform/design/designer.hpp>
+#include "../design/designer.hpp"
+#include "../design/pipeline.hpp"
+#include "../scene/json.hpp"
 
-namespace freeform {
+namespace freeform::io {
 
 inline nlohmann::json stage_report_json(const StageReport& s) {
     nlohmann::json j{{"level", s.level},
@@ -72,4 +79,123 @@ inline nlohmann::json stage_reports_json(const std::vector<StageReport>& stages)
     return out;
 }
 
-}  // namespace freeform
+// Shares of the emitted weight, by where it ended.
+inline nlohmann::json totals_json(const TraceTotals& t) {
+    const double n = double(t.emitted);
+    nlohmann::json j;
+    j["receiver"] = double(t.on_receiver()) / n;
+    j["missed_receiver"] = double(t.weight_by_status[std::size_t(RayStatus::missed_receiver)]) / n;
+    j["missed_surface"] = double(t.weight_by_status[std::size_t(RayStatus::missed_surface)]) / n;
+    j["total_internal_reflection"] = double(t.lost_tir()) / n;
+    j["max_depth"] = double(t.weight_by_status[std::size_t(RayStatus::lost_depth)]) / n;
+    j["absorbed"] = double(t.weight_by_status[std::size_t(RayStatus::absorbed)]) / n;
+    if (t.fresnel_reflected() != 0) j["fresnel_reflected"] = double(t.fresnel_reflected()) / n;
+    return j;
+}
+
+inline nlohmann::json cell_means_json(const CellMeans& c, const std::string& traced) {
+    nlohmann::json j;
+    j["traced"] = traced;
+    j["deposit"] = "nearest";
+    j["rays_per_cell"] = c.rays_per_cell;
+    j["rays"] = c.rays;
+    j["batches"] = c.batches;
+    j["change_on_doubling"] = c.change_on_doubling;
+    j["converged"] = c.converged;
+    return j;
+}
+
+// metrics.json's "fabrication" block (design/machining.hpp): what a machinist checks.
+inline nlohmann::json fabrication_json(const MachiningReport& r, double tool_radius) {
+    nlohmann::json f;
+    f["cutter_side"] = "+normal of the surface frame: the light's side of a mirror, the air side of a lens's front face";
+    f["min_concave_radius"] = r.min_concave_radius ? nlohmann::json(*r.min_concave_radius) : nlohmann::json(nullptr);
+    f["min_concave_radius_at"] = {r.min_concave_u, r.min_concave_v};
+    f["max_slope_degrees"] = r.max_slope_degrees;
+    f["sag"] = {{"min", r.sag_min}, {"max", r.sag_max}, {"range", r.sag_range()}};
+    f["bounding_box"] = {{"min", {r.box_min.x, r.box_min.y, r.box_min.z}},
+                         {"max", {r.box_max.x, r.box_max.y, r.box_max.z}}};
+    if (r.min_glass_thickness) f["min_glass_thickness"] = *r.min_glass_thickness;
+    if (tool_radius > 0) f["tool_radius"] = tool_radius;
+    f["units"] = "metres and degrees; curvatures from central differences of the heights (design/machining.hpp)";
+    return f;
+}
+
+// The exported part's figures: error_exported, energy_exported, error_physical,
+// energy_physical, cell_means, export and fabrication.
+inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportChecks& c) {
+    nlohmann::json exported;
+    exported["subdivisions"] = c.fabrication.subdivisions;
+    exported["subdivisions_chosen"] =
+        c.fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
+    exported["facet_normal_error_mrad"] = c.fabrication.normal_error * 1e3;
+    exported["facet_normal_tolerance_mrad"] = c.fabrication.normal_tolerance * 1e3;
+    exported["triangles"] = c.fabrication.mesh.triangles.size();
+    if (c.cells) {
+        m["error_exported"] = *c.error_exported;
+        m["energy_exported"] = *c.energy_exported;
+        exported["l1_to_design_irradiance"] = *c.l1_to_design;
+        m["error_physical"] = c.cells->error;
+        m["energy_physical"] = c.cells->totals.energy();
+        m["cell_means"] = cell_means_json(*c.cells, "the exported surface.obj traced as flat triangles");
+    } else {
+        m["error_exported"] = nullptr;
+        m["error_physical"] = nullptr;
+        exported["not_traced"] = "built without Embree";
+    }
+    m["export"] = exported;
+    m["fabrication"] = fabrication_json(c.machining, scene.surface.tool_radius);
+}
+
+// A finished design's metrics.json (docs/measures.md), but for what only its caller
+// knows: the command, the scene's path, replicas.
+inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
+    const DesignResult& r = d.result;
+    const DesignOptions& options = d.scene.optimise;
+    nlohmann::json m;
+    m["error"] = d.fitted.error;
+    if (d.error_held_out) m["error_held_out"] = *d.error_held_out;
+    m["energy"] = d.fitted.totals.energy();
+    m["objective"] = r.value.total;
+    if (r.held_out.total >= 0) m["objective_held_out"] = r.held_out.total;
+    m["iterations"] = r.iterations;
+    if (d.scene.surface.tool_radius > 0) m["tool_cut_max_added"] = r.tool_cut;  // metres the cutter left
+    m["accepted"] = r.accepted;
+    m["seconds"] = r.seconds;
+    m["iterations_per_second"] = r.seconds > 0 ? double(r.iterations) / r.seconds : 0.0;
+    m["seed"] = options.seed;
+    m["tracer"] = "heightfield";
+    m["interrupted"] = r.stopped_early;
+    m["rays"] = d.fitted.rays.size();
+    m["mesh"] = nlohmann::json::array({r.surface.nx(), r.surface.ny()});
+    m["where_light_went"] = totals_json(d.fitted.totals);
+    nlohmann::json bank = nlohmann::json::array();
+    for (std::size_t k = 0; k < r.kernel_bank.size(); ++k) {
+        const auto& s = r.kernel_bank[k];
+        bank.push_back({{"sigma_x", s.sigma_x}, {"sigma_y", s.sigma_y}, {"rho", s.rho}, {"support", s.support},
+                        {"weight", k < r.bandit_weights.size() ? r.bandit_weights[k] : 0.0}});
+    }
+    m["bandit"] = to_string(options.bandit);
+    m["bandit_weights"] = r.bandit_weights;
+    if (!r.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = r.preprocess_rates;
+    m["kernels"] = bank;
+    m["levels"] = stage_reports_json(r.stages);
+    m["start"] = start_report_json(r.start);
+    m["effective_scene"] = scene_to_json(d.scene);
+    add_export_json(m, d.scene, d.exported);
+    return m;
+}
+
+// convergence.csv: one row per progress report of the annealing.
+inline std::string convergence_csv(const DesignResult& r) {
+    std::string csv = "seconds,iteration,level,stage,error,energy,objective,temperature\n";
+    for (const auto& c : r.convergence) {
+        std::ostringstream row;
+        row << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
+            << c.energy << ',' << c.objective << ',' << c.temperature << '\n';
+        csv += row.str();
+    }
+    return csv;
+}
+
+}  // namespace freeform::io

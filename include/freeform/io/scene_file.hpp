@@ -14,6 +14,7 @@
 
 #include "../core/error.hpp"
 #include "../core/limits.hpp"
+#include "../design/initial.hpp"
 #include "../scene/json.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
@@ -206,23 +207,7 @@ inline Scene load_scene(const std::filesystem::path& file, const Limits& limits 
 // limits.data_file_bytes and limits.pixels bound the PFM.
 inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny, const Limits& limits = {}) {
     const SurfaceSpec& s = scene.surface;
-    Heightmap h(nx, ny, s.size, s.h_min, s.h_max, s.frame, s.aperture);
-    if (!s.initial_pfm.empty() && s.initial_paraboloid)
-        throw InputError("surface.initial: both a PFM file and a paraboloid are set");
-    if (s.initial_paraboloid) {
-        const double f = s.initial_paraboloid->focal_length;
-        if (!(f > 0) || !std::isfinite(f)) throw InputError("surface.initial.paraboloid.focal_length: must be > 0");
-        std::vector<float> heights(std::size_t(nx) * std::size_t(ny));
-        for (int j = 0; j < ny; ++j)
-            for (int i = 0; i < nx; ++i) {
-                const double u = h.u_of(i), v = h.v_of(j);
-                heights[std::size_t(j) * nx + i] = float((u * u + v * v) / (4 * f));
-            }
-        h.set_heights(heights);
-        return h;
-    }
-    if (s.initial_pfm.empty()) return h;
-
+    if (s.initial_pfm.empty() || s.initial_paraboloid) return initial_surface(scene, nx, ny);
     const std::filesystem::path path = detail::resolve(scene, s.initial_pfm);
     ImageF img;
     try {

@@ -15,6 +15,7 @@
 
 #include "../core/fixed_point.hpp"
 #include "../core/histogram.hpp"
+#include "../core/sparse_delta.hpp"
 #include "target.hpp"
 
 namespace freeform {
@@ -24,28 +25,6 @@ struct ImageSums {
     std::int64_t sobel = 0;
     Fixed on_receiver = 0;
     bool operator==(const ImageSums&) const = default;
-};
-
-// A sparse change of the histogram: dense values (zero where untouched) plus the list of
-// touched cells. Reused between moves; clear() resets only what was touched.
-struct SparseDelta {
-    std::vector<Fixed> value;
-    std::vector<std::int32_t> touched;
-
-    void resize(std::size_t cells) {
-        value.assign(cells, 0);
-        touched.clear();
-    }
-    // Inlined: a move's retrace calls it four to eight times a ray.
-    FREEFORM_FORCE_INLINE void add(std::int64_t cell, Fixed v) {
-        Fixed& x = value[std::size_t(cell)];
-        if (x == 0) touched.push_back(std::int32_t(cell));  // may list a cell twice if it returns to 0: harmless
-        x += v;
-    }
-    void clear() {
-        for (auto c : touched) value[std::size_t(c)] = 0;
-        touched.clear();
-    }
 };
 
 // Per-evaluation working memory (one per concurrent evaluation).

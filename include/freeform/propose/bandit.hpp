@@ -29,6 +29,7 @@
 
 #include "../core/error.hpp"
 #include "../core/rng.hpp"
+#include "../scene/scene.hpp"
 
 namespace freeform {
 
@@ -496,18 +497,24 @@ private:
     Variant v_;
 };
 
-// The names accepted by make_bandit, in the order of increasing sophistication.
-inline constexpr std::string_view bandit_names[] = {"uniform", "history", "ucb1", "discounted-ucb"};
+// A bandit of the given kind with default parameters.
+inline AnyBandit make_bandit(BanditKind kind, int arms, int sync_interval = 64) {
+    switch (kind) {
+        case BanditKind::uniform: return UniformBandit(arms, sync_interval);
+        case BanditKind::history: return HistoryBandit(arms, {.sync_interval = sync_interval});
+        case BanditKind::ucb1: return Ucb1Bandit(arms, {.sync_interval = sync_interval});
+        case BanditKind::discounted_ucb: return DiscountedUcbBandit(arms, {.sync_interval = sync_interval});
+    }
+    throw InputError("unknown bandit kind " + std::to_string(int(kind)));
+}
 
-// A bandit with default parameters from its name; `key` names the option in errors.
+// ... from its name (bandit_kind_names, scene/scene.hpp); `key` names the option in errors.
 inline AnyBandit make_bandit(std::string_view name, int arms, int sync_interval = 64,
                              std::string_view key = "bandit") {
-    if (name == "uniform") return UniformBandit(arms, sync_interval);
-    if (name == "history") return HistoryBandit(arms, {.sync_interval = sync_interval});
-    if (name == "ucb1") return Ucb1Bandit(arms, {.sync_interval = sync_interval});
-    if (name == "discounted-ucb") return DiscountedUcbBandit(arms, {.sync_interval = sync_interval});
+    for (std::size_t k = 0; k < bandit_kind_names.size(); ++k)
+        if (bandit_kind_names[k] == name) return make_bandit(BanditKind(k), arms, sync_interval);
     std::string known;
-    for (auto n : bandit_names) known += (known.empty() ? "" : ", ") + std::string(n);
+    for (auto n : bandit_kind_names) known += (known.empty() ? "" : ", ") + std::string(n);
     throw InputError(std::string(key) + ": unknown bandit '" + std::string(name) + "' (known: " + known + ")");
 }
 

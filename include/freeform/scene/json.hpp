@@ -29,7 +29,7 @@
 
 #include "../core/error.hpp"
 #include "../core/math.hpp"
-#include "frame.hpp"
+#include "../core/frame.hpp"
 #include "scene.hpp"
 
 namespace freeform {
@@ -209,6 +209,14 @@ E enumeration(const json& v, const std::string& path, const std::array<EnumName<
     for (const auto& n : names)
         if (n.name == s) return n.value;
     throw error(path, "must be one of " + allowed + ", got " + describe(v));
+}
+
+// An enum whose names are listed in its values' order (scene/scene.hpp).
+template <class E, std::size_t N>
+E enumeration(const json& v, const std::string& path, const std::array<std::string_view, N>& names) {
+    std::array<EnumName<E>, N> table;
+    for (std::size_t k = 0; k < N; ++k) table[k] = {names[k], E(k)};
+    return enumeration(v, path, table);
 }
 
 template <class E, std::size_t N>
@@ -755,27 +763,19 @@ inline std::span<const OptimiseKey> optimise_keys() {
          [](const OptimiseSpec& o, json& j) { j["smoothness_weight"] = o.smoothness_weight; }},
         {"evaluation",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.evaluation = string_value(v, p);
-             if (o.evaluation != "incremental" && o.evaluation != "full")
-                 throw error(p, "must be one of \"incremental\", \"full\", got " + describe(v));
+             o.evaluation = enumeration<EvaluationMode>(v, p, evaluation_names);
          },
-         [](const OptimiseSpec& o, json& j) { j["evaluation"] = o.evaluation; }},
+         [](const OptimiseSpec& o, json& j) { j["evaluation"] = to_string(o.evaluation); }},
         {"kernel_shapes",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.kernel_shapes = string_value(v, p);
-             if (o.kernel_shapes != "bank" && o.kernel_shapes != "isotropic")
-                 throw error(p, "must be one of \"bank\", \"isotropic\", got " + describe(v));
+             o.kernel_shapes = enumeration<KernelShapes>(v, p, kernel_shape_names);
          },
-         [](const OptimiseSpec& o, json& j) { j["kernel_shapes"] = o.kernel_shapes; }},
+         [](const OptimiseSpec& o, json& j) { j["kernel_shapes"] = to_string(o.kernel_shapes); }},
         {"bandit",
          [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.bandit = string_value(v, p);
-             static constexpr std::array<std::string_view, 4> names{"uniform", "history", "ucb1", "discounted-ucb"};
-             if (std::find(names.begin(), names.end(), o.bandit) == names.end())
-                 throw error(p, "must be one of \"uniform\", \"history\", \"ucb1\", \"discounted-ucb\", got " +
-                                    describe(v));
+             o.bandit = enumeration<BanditKind>(v, p, bandit_kind_names);
          },
-         [](const OptimiseSpec& o, json& j) { j["bandit"] = o.bandit; }},
+         [](const OptimiseSpec& o, json& j) { j["bandit"] = to_string(o.bandit); }},
         {"bandit_sync",
          [](const json& v, const std::string& p, OptimiseSpec& o) { o.bandit_sync = int(integer(v, p, 1, 1 << 20)); },
          [](const OptimiseSpec& o, json& j) { j["bandit_sync"] = o.bandit_sync; }},

@@ -4,7 +4,7 @@
 // light on its way to the surface.
 #include "../core/deposit.hpp"
 #include "../core/math.hpp"
-#include "frame.hpp"
+#include "../core/frame.hpp"
 
 namespace freeform {
 

@@ -1,15 +1,17 @@
 #pragma once
 // A complete design problem as read from a scene file (see docs/scene.md): what emits
 // light, the surface to design, where the light must land and what it should look like.
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "../core/material.hpp"
 #include "../surface/heightmap.hpp"
 #include "light.hpp"
-#include "material.hpp"
 #include "receiver.hpp"
 
 namespace freeform {
@@ -75,6 +77,24 @@ struct LevelPlan {
     std::int64_t iterations = 0;       // iteration budget of the level (split over its stages)
 };
 
+// How a move is judged: incremental (only the rays the move can reach are retraced,
+// docs/architecture.md §4) or full (every ray, for comparisons; the same trajectory).
+enum class EvaluationMode { incremental, full };
+// The kernels moves are made of: the bank of shapes a bandit chooses from, or one round
+// kernel (the reference's single-kernel baseline).
+enum class KernelShapes { bank, isotropic };
+// The bandit that picks a kernel shape (propose/bandit.hpp), in order of sophistication.
+enum class BanditKind { uniform, history, ucb1, discounted_ucb };
+
+// Their names in scene files and reports, in the enums' order: the one mapping between
+// the strings and the values (scene/json.hpp reads and writes with it).
+inline constexpr std::array<std::string_view, 2> evaluation_names{"incremental", "full"};
+inline constexpr std::array<std::string_view, 2> kernel_shape_names{"bank", "isotropic"};
+inline constexpr std::array<std::string_view, 4> bandit_kind_names{"uniform", "history", "ucb1", "discounted-ucb"};
+inline std::string_view to_string(EvaluationMode e) { return evaluation_names[std::size_t(e)]; }
+inline std::string_view to_string(KernelShapes k) { return kernel_shape_names[std::size_t(k)]; }
+inline std::string_view to_string(BanditKind b) { return bandit_kind_names[std::size_t(b)]; }
+
 // Optimiser settings (the scene's "optimise" block; docs/scene.md lists each key).
 // Zero / empty fields mean "derive a default from the case".
 struct OptimiseSpec {
@@ -102,9 +122,9 @@ struct OptimiseSpec {
     double smoothness_weight = 0;
 
     // Proposals.
-    std::string evaluation = "incremental";  // or "full": every move retraces every ray (comparisons)
-    std::string kernel_shapes = "bank";      // or "isotropic": one round kernel, no bandit choice
-    std::string bandit = "history";
+    EvaluationMode evaluation = EvaluationMode::incremental;
+    KernelShapes kernel_shapes = KernelShapes::bank;
+    BanditKind bandit = BanditKind::history;
     int bandit_sync = 64;
     std::int64_t preprocess_iterations = 1000;  // history bandit: trial run with all shapes (0: none)
     int preprocess_keep = 4;                    // ... after which the best shapes are kept

@@ -7,7 +7,7 @@
 // (cell-local coordinates in [0, 1]) lies in flat triangle 0 (v00, v10, v11) when a >= b,
 // with barycentric weights (1-a, a-b, b), and in triangle 1 (v00, v11, v01) otherwise,
 // with weights (1-b, a, b-a): the layout and the weights of find_heightfield_hit. The
-// sub-vertex is placed by the Phong formula of phong_point (trace/path.hpp) and gets the
+// sub-vertex is placed by the Phong formula of phong_point (surface/phong.hpp) and gets the
 // normal of the curved patch there (patch_normal). Sub-cells use the
 // same diagonal direction as the cells, so each sub-triangle lies over one flat triangle.
 // The stored vertex normal is the patch's true normal (patch_normal) for viewers; the
@@ -35,9 +35,9 @@
 
 #include "../core/error.hpp"
 #include "../core/math.hpp"
-#include "../scene/frame.hpp"
-#include "../scene/material.hpp"
-#include "../trace/path.hpp"
+#include "../core/frame.hpp"
+#include "../core/material.hpp"
+#include "phong.hpp"
 #include "heightmap.hpp"
 #include "triangle_mesh.hpp"
 
@@ -46,7 +46,7 @@ namespace freeform {
 // A point of the Phong-tessellated surface, in the surface frame.
 struct PhongVertex {
     Vec3d position;
-    Vec3d normal;  // unit: the patch's own normal there (patch_normal of trace/path.hpp)
+    Vec3d normal;  // unit: the patch's own normal there (patch_normal of surface/phong.hpp)
 };
 
 // The Phong-tessellated point of flat triangle `tri` (ids as in triangle_vertices of

@@ -17,7 +17,7 @@
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../core/view.hpp"
-#include "../scene/frame.hpp"
+#include "../core/frame.hpp"
 
 namespace freeform {
 

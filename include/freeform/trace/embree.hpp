@@ -47,8 +47,8 @@
 
 #include "../core/error.hpp"
 #include "../core/exec.hpp"
-#include "../scene/frame.hpp"
-#include "../scene/material.hpp"
+#include "../core/frame.hpp"
+#include "../core/material.hpp"
 #include "../surface/export.hpp"
 #include "../surface/triangle_mesh.hpp"
 #include "heightfield_kernel.hpp"

@@ -23,7 +23,7 @@
 #include "../core/exec.hpp"
 #include "../core/task_pool.hpp"
 #include "../core/histogram.hpp"
-#include "../objective/image_terms.hpp"
+#include "../core/sparse_delta.hpp"
 #include "../surface/overlay.hpp"
 #include "heightfield.hpp"
 #include "packet.hpp"

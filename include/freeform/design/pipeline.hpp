@@ -1,0 +1,208 @@
+#pragma once
+// A whole design in one call (docs/architecture.md, "The path of a scene through a
+// design"): plan the mesh and the rays, make the start, anneal, smooth, cut with the
+// tool, and judge the result every way metrics.json reports it. The `freeform design`
+// command is this call plus argument parsing and writing files; a program that includes
+// the library gets the same design from the same scene.
+//
+//     const freeform::Scene scene = freeform::io::load_scene("letter-e.json");
+//     const freeform::CompletedDesign d = freeform::design(scene, freeform::io::load_target_image(scene));
+//     freeform::io::write_stl("letter-e.stl", d.exported.fabrication.mesh);
+//
+// No I/O here: the scene, its target image and (when the scene starts from a PFM file)
+// the start surface come in loaded (io/scene_file.hpp, io/target.hpp).
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "../core/error.hpp"
+#include "../core/exec.hpp"
+#include "../objective/target.hpp"
+#include "../scene/rays.hpp"
+#include "../scene/scene.hpp"
+#include "../surface/smooth.hpp"
+#include "../surface/tool.hpp"
+#include "../trace/heightfield.hpp"
+#include "../trace/setup.hpp"
+#include "cell_means.hpp"
+#include "designer.hpp"
+#include "fabrication.hpp"
+#include "initial.hpp"
+#include "machining.hpp"
+#include "start.hpp"
+#if defined(FREEFORM_WITH_EMBREE)
+#include "exported.hpp"
+#endif
+
+namespace freeform {
+
+// What a caller hears during a design. Both may be empty.
+struct DesignCallbacks {
+    // Every optimise.progress_every iterations; returning true stops the design (the best
+    // surface so far is kept and finished like a complete one).
+    std::function<bool(const DesignProgress&)> progress;
+    // Before each long step that reports no progress of its own: "finding the start",
+    // "exporting the surface and tracing the exported mesh".
+    std::function<void(const std::string&)> phase;
+};
+
+// A scene made ready to design: its rays raised for the final mesh
+// (optimise.min_rays_per_mesh_cell) and the surface the design starts from.
+struct PlannedDesign {
+    Scene scene;  // the effective scene: what metrics.json records
+    Heightmap initial;
+};
+
+// Checks that `scene` can be designed and plans it. `initial` replaces the scene's start
+// (a surface read from a file); without it a scene whose start is a PFM file is refused.
+inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {}) {
+    if (!scene.target) throw InputError("target: a design needs a \"target\" block");
+    if (!scene.meshes.empty())
+        throw InputError("meshes: designing with extra meshes is not supported yet (render them with the Embree tracer)");
+    PlannedDesign p{scene, Heightmap{}};
+    const auto [nx, ny] = final_mesh(scene);
+    // Enough rays for the final mesh: the design, its checks and its final render use them.
+    p.scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
+    if (initial) {
+        p.initial = std::move(*initial);
+    } else {
+        if (!scene.surface.initial_pfm.empty())
+            throw InputError("surface.initial: the start is a PFM file; load it (io::make_initial_heightmap) and "
+                             "pass it to design()");
+        p.initial = initial_surface(p.scene, nx, ny);
+    }
+    // A transport start the scene asks for by name must be possible: say so before any work.
+    if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == "transport")
+        flat_footprint(p.scene, p.initial);
+    return p;
+}
+
+// A surface traced with one set of rays at the receiver's resolution, against the target
+// scaled to those rays.
+struct TracedDesign {
+    RaySet rays;
+    Histogram histogram;
+    TraceTotals totals;
+    Target target;
+    double error = -1;  // l1_error(histogram, target)
+};
+
+inline TracedDesign trace_design(const Scene& scene, const Heightmap& surface, const ImageD& target, std::uint64_t seed,
+                                 int threads) {
+    const PathParams pp = make_path_params(scene);
+    TracedDesign t{generate_rays(scene.light, surface, scene.receiver, seed),
+                   Histogram(scene.receiver.width, scene.receiver.height), {}, {}, -1};
+    HeightfieldTracer(surface, t.rays, pp).trace_all(exec::omp_t{threads}, t.histogram, t.totals);
+    t.target = make_target(target, scene.receiver.width, scene.receiver.height, target_total(t.rays, pp));
+    t.error = l1_error(t.histogram, t.target);
+    return t;
+}
+
+// The exported part and what it does (docs/measures.md).
+struct ExportChecks {
+    Fabrication fabrication;    // the mesh that is milled (surface.obj / .stl)
+    MachiningReport machining;  // metrics.json's "fabrication" block
+    // Traced as flat triangles (Embree builds only; empty without Embree):
+    std::optional<double> error_exported;   // with the design's rays and deposit (a diagnostic)
+    std::optional<double> energy_exported;
+    std::optional<double> l1_to_design;     // between its irradiance and the design's
+    std::optional<CellMeans> cells;         // converged cell means: error_physical
+};
+
+// Cell means for error_physical: rays of their own jitter, not the design's, so the figure
+// is not the one the design was fitted to.
+inline CellMeanOptions physical_cell_mean_options(std::uint64_t seed) {
+    CellMeanOptions o;
+    o.seed = hash_combine(seed, 0x63656c6c6d65616eULL);
+    return o;
+}
+
+inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, const TracedDesign& fitted,
+                                 const ImageD& target, int threads) {
+    ExportChecks c{make_fabrication(scene, surface), {}, {}, {}, {}, {}};
+    c.machining = machining_report(scene, surface, c.fabrication.mesh);
+#if defined(FREEFORM_WITH_EMBREE)
+    const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
+    const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted.rays);
+    c.error_exported = l1_error(et.histogram, fitted.target);
+    c.energy_exported = et.totals.energy();
+    c.l1_to_design = l1_error(et.histogram.cells, fitted.histogram.cells, fitted.rays.total);
+    c.cells = exported_cell_means(exec::omp_t{threads}, scene, surface, geometry, &target,
+                                  physical_cell_mean_options(scene.optimise.seed));
+#else
+    (void)fitted, (void)target, (void)threads;
+#endif
+    return c;
+}
+
+// A finished design: the surface as it is milled, and every figure metrics.json reports.
+struct CompletedDesign {
+    Scene scene;           // the effective scene (rays per cell raised for the final mesh)
+    DesignResult result;   // result.surface: after smoothing and the tool's cut
+    TracedDesign fitted;   // traced with the scene's seed: the rays it was fitted to
+    std::optional<double> error_held_out;  // with the final level's held-out rays (checks on)
+    ExportChecks exported;
+
+    // The figure a design is judged by: the cell-mean error of the exported mesh
+    // (docs/measures.md); empty in a build without Embree.
+    std::optional<double> error_physical() const {
+        if (!exported.cells) return std::nullopt;
+        return exported.cells->error;
+    }
+};
+
+// Smooths (optimise.smooth_iterations), cuts with the tool (surface.tool_radius) and
+// judges an annealed design: the fitted and held-out errors, the export and its cell means.
+inline CompletedDesign finish_design(const Scene& scene, DesignResult result, const ImageD& target,
+                                     const DesignCallbacks& callbacks = {}) {
+    const DesignOptions& options = scene.optimise;
+    if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
+    // The tool's cut last of all: every figure describes what the mill leaves.
+    if (scene.surface.tool_radius > 0)
+        result.tool_cut = std::max(result.tool_cut, cut_with_ball(result.surface, scene.surface.tool_radius));
+    const int threads = options.threads;
+    CompletedDesign d{scene, std::move(result), {}, std::nullopt, {}};
+    d.fitted = trace_design(scene, d.result.surface, target, options.seed, threads);
+    if (d.result.held_out.total >= 0)
+        d.error_held_out = trace_design(scene, d.result.surface, target, d.result.held_out_seed, threads).error;
+    if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
+    d.exported = check_export(scene, d.result.surface, d.fitted, target, threads);
+    return d;
+}
+
+// Designs a planned scene (plan_design) so that its light matches `target` (relative
+// irradiance, any resolution: io::load_target_image makes it from the scene's target
+// block).
+inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
+    if (callbacks.phase) callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+    const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
+    DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise, progress);
+    return finish_design(plan.scene, std::move(result), target, callbacks);
+}
+
+// Plans and designs `scene`. `initial`: a start surface of the caller's (see plan_design).
+// Throws InputError for a scene that cannot be designed.
+inline CompletedDesign design(const Scene& scene, const ImageD& target, const DesignCallbacks& callbacks = {},
+                              std::optional<Heightmap> initial = {}) {
+    return design(plan_design(scene, std::move(initial)), target, callbacks);
+}
+
+// The start alone (the transport surface, or whatever the scene starts from), judged and
+// finished like a design but not annealed: what `freeform design --start-only` writes.
+inline CompletedDesign design_start(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
+    if (callbacks.phase) callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+    const auto t0 = std::chrono::steady_clock::now();
+    DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.scene.optimise.seed,
+                                          thread_count(exec::omp_t{plan.scene.optimise.threads}));
+    DesignResult result;
+    result.start = start.report;
+    result.start.plan = "the start only: no annealing";
+    result.surface = std::move(start.surface);
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return finish_design(plan.scene, std::move(result), target, callbacks);
+}
+
+}  // namespace freeform
