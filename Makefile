@@ -3,6 +3,8 @@
 #   make test           release build + all tests
 #   make test-clang     Release build with Debian's clang + tests (build/clang)
 #   make test-sanitize  AddressSanitizer/UBSan build with Debian's clang + tests (CI's clang build)
+#   make test-tsan      ThreadSanitizer build with Debian's clang: the threaded tests (task pool,
+#                       annealer, incremental evaluation; build/tsan)
 #   make fuzz [FUZZ_TIME=60] [FUZZ_JOBS=1]  libFuzzer + ASan/UBSan build with clang (build/fuzz),
 #                       then each reader's fuzz target for FUZZ_TIME seconds; findings in
 #                       build/fuzz/artifacts/<reader>/, non-zero exit if any (docs/fuzzing.md)
@@ -31,7 +33,7 @@ FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o 
 # Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.
 .NOTPARALLEL:
 
-.PHONY: all deps deps-bench deps-clang deps-validate validate configure build demo test test-clang test-sanitize fuzz bench clean format
+.PHONY: all deps deps-bench deps-clang deps-validate validate configure build demo test test-clang test-sanitize test-tsan fuzz bench clean format
 
 all: build
 
@@ -78,6 +80,11 @@ test-sanitize: deps deps-clang
 	cmake --preset sanitize
 	cmake --build --preset sanitize --parallel $(JOBS)
 	ctest --preset sanitize
+
+test-tsan: deps deps-clang
+	cmake --preset tsan
+	cmake --build --preset tsan --parallel $(JOBS)
+	ctest --preset tsan
 
 # The fuzz targets (tests/fuzz) run one after another by default; FUZZ_JOBS=2 runs two at
 # a time. Each works on a scratch copy of its seed corpus (build/fuzz/corpus-work).

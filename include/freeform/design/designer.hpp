@@ -562,7 +562,14 @@ class Designer {
     Problem make_problem(const LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
         return Problem(surface_, L.rays, L.params,
                        make_target(target_image_, L.receiver.width, L.receiver.height, target_total(L.rays, L.params)),
-                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0);
+                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0, backend());
+    }
+
+    // The backend, held to the design's thread count (its full rebuilds included).
+    Backend backend() const {
+        Backend b{};
+        if constexpr (requires { b.threads; }) b.threads = threads_;
+        return b;
     }
 
     // The history bandit's pre-process (reference §4.3.2): a short run with every shape
@@ -801,7 +808,7 @@ class Designer {
         Problem final_state(surface_, rays, final_pp,
                             make_target(target_image_, receiver.width, receiver.height, target_total(rays, final_pp)),
                             weights_, penalties_, ps, make_bandit(BanditKind::uniform, std::max<int>(1, int(ps.bank.size()))),
-                            1.0, 1.0);
+                            1.0, 1.0, backend());
         result_.irradiance = final_state.histogram();
         result_.target = final_state.image().target();
         result_.value = final_state.value();

@@ -42,7 +42,8 @@ struct ProposalSettings {
 struct HeightfieldBackend {
     static constexpr bool concurrent_deltas = true;
     static constexpr const char* name = "heightfield";
-    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
+    int threads = 0;  // of the full rebuilds (a level's start, replaced heights, merges); 0: every core
+    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp_t{threads}); }
     void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change,
                   TaskPool* pool = nullptr) const {
         trace.evaluate(o, change, pool);
@@ -55,7 +56,8 @@ struct HeightfieldBackend {
 struct FullRetraceBackend {
     static constexpr bool concurrent_deltas = true;
     static constexpr const char* name = "full";
-    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp); }
+    int threads = 0;  // as HeightfieldBackend's
+    Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp_t{threads}); }
     void evaluate(const IncrementalTrace& trace, const HeightOverlay& o, TraceChange& change,
                   TaskPool* pool = nullptr) const {
         trace.evaluate_all(o, change, pool);
