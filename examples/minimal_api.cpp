@@ -48,12 +48,9 @@ int main(int argc, char** argv) try {
         return false;  // true would stop the design (the best state so far is kept)
     });
 
-    // 4. Save. PFM rows run top to bottom, so image row 0 is the +v edge (grid row ny-1).
+    // 4. Save (heightmap.pfm: image row 0 is the +v edge, io/heightmap.hpp).
     const Heightmap& hm = r.surface;
-    ImageF heights(hm.ny(), hm.nx());
-    for (int j = 0; j < hm.ny(); ++j)
-        for (int i = 0; i < hm.nx(); ++i) heights(hm.ny() - 1 - j, i) = hm(i, j);
-    io::write_pfm(out / "heightmap.pfm", heights);
+    io::write_heightmap(out / "heightmap.pfm", hm);
     io::write_obj(out / "surface.obj", tessellate_surface(hm, float(s.phong_alpha), 4));
     io::write_png(out / "irradiance.png", io::tone_map(r.irradiance.to_image()));
     std::printf("error %.4f, energy %.4f after %lld iterations in %.1f s; results in %s/\n", r.value.error,

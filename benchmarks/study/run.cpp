@@ -71,10 +71,7 @@ void save_images(const std::string& prefix, const Evaluation& e, const Heightmap
     if (p.has_parent_path()) fs::create_directories(p.parent_path());
     io::write_pfm(prefix + "-irradiance.pfm", e.histogram.to_image().cast<float>());
     io::write_pfm(prefix + "-target.pfm", target_image(e.target).cast<float>());
-    ImageF h(surface.ny(), surface.nx());
-    for (int j = 0; j < surface.ny(); ++j)
-        for (int i = 0; i < surface.nx(); ++i) h(surface.ny() - 1 - j, i) = surface(i, j);
-    io::write_pfm(prefix + "-heightmap.pfm", h);
+    io::write_heightmap(prefix + "-heightmap.pfm", surface);
 }
 
 // A fingerprint of the designed heights, bit for bit: two runs that followed the same

@@ -728,10 +728,11 @@ Scene design_scene(const DesignArgs& a, const Limits& limits) {
         scene.optimise.time_budget = *a.time_budget;
     }
     if (a.threads) scene.optimise.threads = *a.threads;
-    if (!scene.target) throw InputError(a.scene.string() + ": target: a design needs a \"target\" block");
-    if (!scene.meshes.empty())
-        throw InputError(a.scene.string() +
-                         ": meshes: designing with extra meshes is not supported yet (render them with --tracer embree)");
+    try {
+        check_designable(scene);  // before any work (the target image is loaded next)
+    } catch (const InputError& e) {
+        throw InputError(a.scene.string() + ": " + e.what());
+    }
     scene.optimise.progress_every = 500;  // the live line's pace
     return scene;
 }

@@ -495,7 +495,7 @@ def main():
         rows.append((name, d, e_ff, e_pv, ff_s, pv_s, res, info))
         case_lines.append((name, d, d_full, e_ff, e_pv, dm.get("error"), dm.get("error_exported"), design_s, ff_s,
                            pv_s, res, "%d x %d" % (w, h), info, ffm.get("energy"), lens))
-        if key not in [c[0] for c in CASES[:4]] and not args.skip_plain:
+        if changes and not args.skip_plain:
             # What the variant changes, seen by both renderers: the same part rendered without it.
             plain = merged(scene, {"light": {"angular_radius": 0.0}, "trace": {"fresnel": False}})
             pwork = os.path.join(work, "plain")

@@ -56,12 +56,17 @@ struct PlannedDesign {
     Heightmap initial;
 };
 
-// Checks that `scene` can be designed and plans it. `initial` replaces the scene's start
-// (a surface read from a file); without it a scene whose start is a PFM file is refused.
-inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {}) {
+// Throws InputError, naming the key, for a scene that cannot be designed.
+inline void check_designable(const Scene& scene) {
     if (!scene.target) throw InputError("target: a design needs a \"target\" block");
     if (!scene.meshes.empty())
         throw InputError("meshes: designing with extra meshes is not supported yet (render them with the Embree tracer)");
+}
+
+// Checks that `scene` can be designed and plans it. `initial` replaces the scene's start
+// (a surface read from a file); without it a scene whose start is a PFM file is refused.
+inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {}) {
+    check_designable(scene);
     PlannedDesign p{scene, Heightmap{}};
     const auto [nx, ny] = final_mesh(scene);
     // Enough rays for the final mesh: the design, its checks and its final render use them.
@@ -70,7 +75,7 @@ inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> in
         p.initial = std::move(*initial);
     } else {
         if (!scene.surface.initial_pfm.empty())
-            throw InputError("surface.initial: the start is a PFM file; load it (io::make_initial_heightmap) and "
+            throw InputError("surface.initial: the start is a PFM file; load it (io::load_start_surface) and "
                              "pass it to design()");
         p.initial = initial_surface(p.scene, nx, ny);
     }

@@ -50,9 +50,8 @@ inline std::optional<Heightmap> load_start_surface(const Scene& scene, const Lim
 // The surface a render or a design begins with, before any transport start: the scene's
 // PFM file, or its flat or paraboloid start, on the design's final mesh.
 inline Heightmap scene_surface(const Scene& scene, const Limits& limits = {}) {
-    if (auto from_file = load_start_surface(scene, limits)) return std::move(*from_file);
     const auto [nx, ny] = final_mesh(scene);
-    return initial_surface(scene, nx, ny);
+    return make_initial_heightmap(scene, nx, ny, limits);
 }
 
 }  // namespace freeform::io

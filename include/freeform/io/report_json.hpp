@@ -188,14 +188,12 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
 
 // convergence.csv: one row per progress report of the annealing.
 inline std::string convergence_csv(const DesignResult& r) {
-    std::string csv = "seconds,iteration,level,stage,error,energy,objective,temperature\n";
-    for (const auto& c : r.convergence) {
-        std::ostringstream row;
-        row << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
+    std::ostringstream csv;
+    csv << "seconds,iteration,level,stage,error,energy,objective,temperature\n";
+    for (const auto& c : r.convergence)
+        csv << c.seconds << ',' << c.iteration << ',' << c.level << ',' << c.stage << ',' << c.error << ','
             << c.energy << ',' << c.objective << ',' << c.temperature << '\n';
-        csv += row.str();
-    }
-    return csv;
+    return csv.str();
 }
 
 }  // namespace freeform::io
