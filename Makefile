@@ -27,7 +27,7 @@ PYTHON ?= $(shell test -x /usr/bin/python3 && echo /usr/bin/python3 || echo pyth
 DEMO_OUT := results/demo
 DEMO_CMD = $(BIN)/freeform design examples/scenes/letter-e.json --out $(DEMO_OUT) --time-budget 40
 
-SOURCE_DIRS := include tests examples benchmarks
+SOURCE_DIRS := include apps tests examples benchmarks
 FORMAT_FILES = $(shell find $(SOURCE_DIRS) \( -name '*.hpp' -o -name '*.cpp' -o -name '*.cuh' -o -name '*.cu' \) -type f 2>/dev/null)
 
 # Prerequisites run in order (deps before build) even under make -j; the build itself is parallel.

@@ -3,7 +3,7 @@
 // --time-budget). The input is split at NUL bytes into arguments after argv[0]; no
 // command is ever run.
 //
-// examples/freeform/main.cpp is included whole, with its main() left out; its functions
+// apps/freeform/main.cpp is included whole, with its main() left out; its functions
 // are in an anonymous namespace, so this translation unit can call them directly.
 #define FREEFORM_CLI_NO_MAIN
 #include <cstddef>
@@ -12,7 +12,7 @@
 #include <string_view>
 #include <vector>
 
-#include "../../examples/freeform/main.cpp"
+#include "../../apps/freeform/main.cpp"
 #include "fuzz_common.hpp"
 
 namespace {
