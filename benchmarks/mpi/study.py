@@ -9,7 +9,7 @@ fitted to, where the build reports it) and the wall time of the whole command.
 
     benchmarks/mpi/study.py --bin build/release/bin --cores 2 --budget 20 --seeds 1 2 3 \
         --scenes examples/scenes/camera.json examples/scenes/letter-e.json \
-        --out benchmarks/results/mpi
+        --out /tmp/mpi-study
 
 Writes runs.csv and summary.md under --out (the raw design outputs go to a temporary
 directory). runs.csv is rewritten after every run, so a study stopped early keeps what

@@ -2,7 +2,7 @@
 """Tables of issue 11, parts 3 and 4, from the study's run files.
 
     /usr/bin/python3 benchmarks/study/issue11_tables.py fixed [STABILITY_DIR [TIME_BUDGET_DIR]]
-        (defaults benchmarks/results/stability_fixed, benchmarks/results/model13)
+        (defaults benchmarks/results/stability_fixed_cal, benchmarks/results/model13)
     /usr/bin/python3 benchmarks/study/issue11_tables.py mesh [MESH_RULE_DIR]
         (default benchmarks/results/mesh_rule)
 
@@ -194,7 +194,7 @@ def main() -> None:
     if len(sys.argv) < 2 or sys.argv[1] not in ("fixed", "mesh"):
         sys.exit(__doc__)
     if sys.argv[1] == "fixed":
-        print(fixed(Path(sys.argv[2] if len(sys.argv) > 2 else "benchmarks/results/stability_fixed"),
+        print(fixed(Path(sys.argv[2] if len(sys.argv) > 2 else "benchmarks/results/stability_fixed_cal"),
                     Path(sys.argv[3] if len(sys.argv) > 3 else "benchmarks/results/model13")), end="")
     else:
         print(mesh(Path(sys.argv[2] if len(sys.argv) > 2 else "benchmarks/results/mesh_rule")), end="")

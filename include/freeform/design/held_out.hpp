@@ -5,7 +5,7 @@
 // per receiver cell and a fine mesh, it can lower that objective by arranging where
 // those particular rays land (fitting their sampling noise) while the light the surface
 // really throws gets no better, or worse. Measured on the headlight case (53² mesh,
-// 16 rays per cell, 64,000 iterations; benchmarks/results/stability_fixed_speed11, with
+// 16 rays per cell, 64,000 iterations; git show fc8ce6e:benchmarks/results/stability_fixed_speed11/REPORT.md, with
 // the old, too hot initial temperature): the objective's error fell from 0.016 to
 // 0.010 while the same surfaces traced with other rays went from 0.0164 to 0.0170. With
 // today's calibration both fall (0.0163 -> 0.0063 fitted, -> 0.0096 on other rays;

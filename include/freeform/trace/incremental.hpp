@@ -409,7 +409,7 @@ public:
     // Fewest rays worth handing to another thread (a few microseconds of tracing; a worker
     // that yields between runs answers within about one). 256 before the caller stopped
     // sleeping in its wait: 128 makes 201² / 100² moves (~270 rays) 1.46x faster on two
-    // threads and changes nothing measurable at 101² (benchmarks/results/speed12).
+    // threads and changes nothing measurable at 101² (git show 1827177:benchmarks/results/speed12/min_rays_per_thread.txt).
     static constexpr std::size_t min_rays_per_thread = 128;
 
     // Retraces the rays `o` can affect against the surface with `o` applied, without
