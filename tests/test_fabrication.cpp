@@ -10,6 +10,8 @@
 
 #include <freeform/core/rng.hpp>
 #include <freeform/design/fabrication.hpp>
+#include <freeform/design/pipeline.hpp>
+#include <freeform/design/render.hpp>
 #include <freeform/design/start.hpp>
 #include <freeform/surface/export.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
@@ -192,4 +194,55 @@ TEST_CASE("a mesh is its geometry: stored normals change nothing unless asked fo
     CHECK(run(mesh, shaded).histogram != run(scrambled, shaded).histogram);
 }
 
+
+// render() is the library's `freeform render`: a design's height map, traced with the
+// design's rays, gives the design's error bit for bit; its exported mesh, traced in the
+// surface's place, gives the design's error_physical (both are the same facets and the
+// same cell-mean rays, traced by two routes through the code).
+TEST_CASE("render(): a design's height map renders to its error, its exported mesh to its error_physical") {
+    Scene s = basic_scene(40, 4);
+    s.target = TargetSpec{};
+    s.surface.nx = s.surface.ny = 21;
+    s.optimise.max_iterations = 2000;
+    s.optimise.time_budget = 1000;
+    s.optimise.seed = 5;
+    s.optimise.threads = 2;
+    const ImageD target = ring_and_bar(40, 40);
+    const CompletedDesign d = design(s, target);
+    REQUIRE(d.error_physical());
+
+    const RenderResult h = render(d.scene, d.result.surface, target);
+    CHECK(h.decision.tracer == TracerChoice::heightfield);
+    CHECK(h.rays == d.fitted.rays.size());
+    CHECK(*h.error == d.fitted.error);
+    CHECK(h.totals.energy() == d.fitted.totals.energy());
+
+    RenderRequest job;
+    job.scene = d.scene;
+    job.surface = d.result.surface;
+    job.target = target;
+    job.mesh = d.exported.fabrication.mesh;
+    const RenderResult m = render(job);
+    CHECK(m.decision.tracer == TracerChoice::embree);
+    MESSAGE("error_physical: design ", *d.error_physical(), ", exported mesh rendered ", *m.error_physical(),
+            "; the height map rendered ", *h.error_physical());
+    CHECK(std::abs(*m.error_physical() - *d.error_physical()) < 0.003);
+    CHECK(std::abs(m.cells->totals.energy() - d.exported.cells->totals.energy()) < 0.003);
+
+    SUBCASE("requests that cannot be traced are refused, naming the part") {
+        RenderRequest bad = job;
+        bad.mesh.reset();
+        bad.mesh_normals = true;
+        CHECK_THROWS_WITH_AS(render(bad), doctest::Contains("mesh normals"), InputError);
+        bad.mesh_normals = false;
+        bad.mesh_material = MeshMaterial::refractive(1.5);
+        CHECK_THROWS_WITH_AS(render(bad), doctest::Contains("mesh material"), InputError);
+        bad = job;
+        bad.scene_meshes.push_back(d.exported.fabrication.mesh);
+        CHECK_THROWS_WITH_AS(render(bad), doctest::Contains("meshes:"), InputError);
+        bad = job;
+        bad.tracer = TracerChoice::heightfield;
+        CHECK_THROWS_AS(render(bad), InputError);
+    }
+}
 #endif

@@ -36,6 +36,7 @@
 #include <freeform/design/cell_means.hpp>
 #include <freeform/design/designer.hpp>
 #include <freeform/design/pipeline.hpp>
+#include <freeform/design/render.hpp>
 #include <freeform/design/fabrication.hpp>
 #include <freeform/design/machining.hpp>
 #include <freeform/design/resources.hpp>
@@ -206,55 +207,12 @@ Limits parse_limits(const std::vector<std::string>& settings) {
     return limits;
 }
 
-constexpr bool embree_built =
-#if defined(FREEFORM_WITH_EMBREE)
-    true;
-#else
-    false;
-#endif
 constexpr bool mpi_built =
 #if defined(FREEFORM_WITH_MPI)
     true;
 #else
     false;
 #endif
-
-struct RenderOutcome {
-    Histogram histogram;
-    TraceTotals totals;
-    double seconds = 0;
-};
-
-// Traces all rays in chunks so that a long render can show a progress bar.
-template <class T>
-RenderOutcome render_with(const T& tracer, const RaySet& rays, int threads, StatusLine& status) {
-    const auto start = std::chrono::steady_clock::now();
-    const PathParams& pp = tracer.params();
-    RenderOutcome out{Histogram(pp.receiver.width, pp.receiver.height), {}, 0};
-    out.totals.emitted = rays.total;
-    const std::int64_t n = rays.size();
-    const int chunks = int(std::clamp<std::int64_t>(n / 65536, 1, 64));
-    std::vector<std::int32_t> ids;
-    std::vector<RayRecord> records;
-    for (int c = 0; c < chunks; ++c) {
-        const std::int64_t begin = n * c / chunks, end = n * (c + 1) / chunks;
-        ids.resize(std::size_t(end - begin));
-        for (std::int64_t k = begin; k < end; ++k) ids[std::size_t(k - begin)] = std::int32_t(k);
-        records.resize(ids.size());
-        tracer.trace(exec::omp_t{threads}, ids, records);
-        for (std::size_t k = 0; k < ids.size(); ++k) {
-            const Fixed w = rays.weight[std::size_t(ids[k])];
-            out.totals.add(records[k], w);
-            deposit_record(pp.receiver, records[k], w, out.histogram.cells);
-        }
-        const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        if (s > 1.0) status.show("tracing " + bar(double(c + 1) / chunks) + " " + std::to_string(end) + "/" +
-                                 std::to_string(n) + " rays");
-    }
-    status.finish();
-    out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return out;
-}
 
 ImageD target_image_of(const Target& t) {
     ImageD img(t.height, t.width);
@@ -330,152 +288,82 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
     staged.commit("metrics.json");
 }
 
-// What a render traces: the scene, the surface (a heightmap, the scene's start, or the
-// grid that places the rays when a mesh replaces it), the meshes, and how to trace them.
-struct RenderInputs {
-    Scene scene;
-    TracerDecision decision;
-    std::optional<MeshMaterial> mesh_material;  // --material: --mesh is a refractive solid
-    std::optional<ImageD> target;
-    Heightmap surface;
-    std::optional<StartReport> start;  // the scene's start was traced (transport)
-    std::optional<TriangleMesh> mesh;  // --mesh
-    std::vector<TriangleMesh> extra;   // the scene's meshes[]
-    int threads = 1;
-};
-
-// The surface a render traces without --mesh: the heightmap given, or the scene's start
-// as a design would begin (the transport surface by default).
-void render_surface(const RenderArgs& a, const Limits& limits, RenderInputs& in) {
-    const Scene& scene = in.scene;
-    if (!a.heightmap.empty()) {
-        try {
-            in.surface = io::read_heightmap(scene, a.heightmap, limits);
-        } catch (const InputError& e) {
-            throw InputError(std::string("--heightmap: ") + e.what());
-        }
-        return;
-    }
-    in.surface = io::scene_surface(scene, limits);
-    // Not needed when a mesh replaces the surface: the grid only places the rays.
-    if (in.target && a.mesh.empty() && starts_from_transport(scene) && scene.meshes.empty()) {
-        if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, in.surface);
-        DesignStart st = make_design_start(scene, std::move(in.surface), *in.target, scene.optimise.seed, in.threads);
-        in.start = st.report;
-        in.surface = std::move(st.surface);
-    }
-}
-
-// The meshes a render reads: --mesh and the scene's meshes[]. A solid is one surface:
-// corners repeated per face (OBJ with face normals, STL) are merged before its edges are
-// matched.
-void render_meshes(const RenderArgs& a, const Limits& limits, RenderInputs& in) {
-    if (!a.mesh.empty()) in.mesh = io::read_mesh(a.mesh, limits);
-    if (in.mesh && in.mesh_material) {
-        in.mesh = io::welded(*in.mesh);
-        check_refractive_solid(*in.mesh, a.mesh.string());
-    }
-    for (const auto& m : in.scene.meshes) {
-        in.extra.push_back(io::read_mesh(m.file, limits));
-        if (m.material.is_refractive()) {
-            in.extra.back() = io::welded(in.extra.back());
-            check_refractive_solid(in.extra.back(), m.file.string());
-        }
-    }
-    if (a.mesh_normals && a.mesh.empty() && in.scene.meshes.empty())
-        throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
-}
-
-RenderInputs render_inputs(const RenderArgs& a, const Limits& limits) {
-    RenderInputs in;
-    in.scene = io::load_scene(a.scene, limits);
-    Scene& scene = in.scene;
+// What `freeform render` traces, read from the files the arguments name: the scene, the
+// surface (a heightmap, or the scene's start; the grid that places the rays when a mesh
+// replaces it), the meshes, and the target.
+RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
+    RenderRequest job;
+    job.scene = io::load_scene(a.scene, limits);
+    Scene& scene = job.scene;
     if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
     check_output_dir(a.out, render_outputs);
-    in.threads = thread_count(exec::omp_t{a.threads});
-    check_resources(scene, RunKind::render, in.threads, limits);
+    job.threads = thread_count(exec::omp_t{a.threads});
+    check_resources(scene, RunKind::render, job.threads, limits);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
     if (!a.material.empty()) {
         if (a.mesh.empty()) throw InputError("--material: applies to the mesh of --mesh, and none was given");
-        in.mesh_material = parse_mesh_material(a.material);
+        job.mesh_material = parse_mesh_material(a.material);
     }
-    const TracerChoice requested = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
-    in.decision = choose_tracer(scene, !a.mesh.empty(), requested, embree_built);
-    if (scene.target) in.target = io::load_target_image(scene, limits);
-    render_surface(a, limits, in);
-    render_meshes(a, limits, in);
-    // A surface (the scene's or a heightmap) is traced with the rays a design on its grid
-    // fits (optimise.min_rays_per_mesh_cell), so a design's heightmap renders to its error.
-    if (!in.mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, in.surface.nx(), in.surface.ny());
-    return in;
+    job.tracer = a.tracer.empty() ? scene.trace.tracer : parse_tracer(a.tracer);
+    choose_tracer(scene, !a.mesh.empty(), job.tracer, embree_available);  // refuses before any reading
+    if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
+        throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
+    if (scene.target) job.target = io::load_target_image(scene, limits);
+    if (!a.heightmap.empty()) {
+        try {
+            job.surface = io::read_heightmap(scene, a.heightmap, limits);
+        } catch (const InputError& e) {
+            throw InputError(std::string("--heightmap: ") + e.what());
+        }
+    } else {
+        job.surface = io::scene_surface(scene, limits);
+        job.surface_is_scene_start = true;
+    }
+    // A solid is one surface: corners repeated per face (OBJ with face normals, STL) are
+    // merged before its edges are matched.
+    if (!a.mesh.empty()) {
+        job.mesh = io::read_mesh(a.mesh, limits);
+        job.mesh_name = a.mesh.string();
+        if (job.mesh_material) job.mesh = io::welded(*job.mesh);
+    }
+    for (const auto& m : scene.meshes) {
+        job.scene_meshes.push_back(io::read_mesh(m.file, limits));
+        if (m.material.is_refractive()) job.scene_meshes.back() = io::welded(job.scene_meshes.back());
+    }
+    job.mesh_normals = a.mesh_normals;
+    return job;
 }
 
-// Traces `rays` through what is rendered, with the receiver of `sc` (the scene, or its
-// nearest-deposit twin for the cell means).
-RenderOutcome trace_render(const RenderInputs& in, const RenderArgs& a, const Scene& sc, RaySet& rays,
-                           StatusLine& status) {
-    PathParams pp = make_path_params(sc);
-    // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
-    if (in.mesh) pp.phong_alpha = a.mesh_normals ? pp.phong_alpha : 0.0f;
-    // A refractive solid is the whole lens: the scene's lens model (its flat back face)
-    // does not apply (and the beam starts above the solid, below).
-    if (in.mesh_material) pp.material = MaterialView{};
-    pp.interpolated_normals = a.mesh_normals;
-    if (in.decision.tracer == TracerChoice::heightfield)
-        return render_with(HeightfieldTracer(in.surface, rays, pp), rays, in.threads, status);
-#if defined(FREEFORM_WITH_EMBREE)
-    std::vector<ExtraMesh> extras;
-    for (std::size_t k = 0; k < in.extra.size(); ++k)
-        extras.push_back(to_surface_frame(in.extra[k], sc.surface.frame, sc.meshes[k].material));
-    if (in.mesh && in.mesh_material) {
-        ExtraMesh solid = to_surface_frame(*in.mesh, sc.surface.frame, *in.mesh_material);
-        start_above(sc.light, sc.surface.size, solid.mesh, rays);
-        extras.insert(extras.begin(), std::move(solid));
-        return render_with(EmbreeTracer(rays, pp, std::move(extras)), rays, in.threads, status);
-    }
-    if (in.mesh) {
-        const ExtraMesh local = to_surface_frame(*in.mesh, sc.surface.frame, true);
-        return render_with(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, in.threads, status);
-    }
-    return render_with(EmbreeTracer(in.surface, rays, pp, std::move(extras)), rays, in.threads, status);
-#else
-    (void)sc;
-    return RenderOutcome{};  // choose_tracer never picks Embree in a build without it
-#endif
-}
-
-json render_metrics(const RenderArgs& a, const RenderInputs& in, const RaySet& rays, const RenderOutcome& r,
-                    const std::optional<CellMeans>& cells) {
-    const Scene& scene = in.scene;
+json render_metrics(const RenderArgs& a, const RenderRequest& job, const RenderResult& r) {
+    const Scene& scene = r.scene;
     json m;
     m["command"] = "render";
     m["scene"] = a.scene.string();
-    m["tracer"] = tracer_name(in.decision.tracer);
-    m["tracer_reason"] = in.decision.reason;
-    m["threads"] = in.threads;
+    m["tracer"] = tracer_name(r.decision.tracer);
+    m["tracer_reason"] = r.decision.reason;
+    m["threads"] = r.threads;
     m["seed"] = scene.optimise.seed;
-    m["rays"] = rays.size();
+    m["rays"] = r.rays;
     m["rays_hit_receiver"] = r.totals.rays_hit_receiver;
     m["energy"] = r.totals.energy();
     m["where_light_went"] = io::totals_json(r.totals);
     m["seconds"] = r.seconds;
-    m["rays_per_second"] = r.seconds > 0 ? double(rays.size()) / r.seconds : 0.0;
-    m["mesh"] = json::array({in.surface.nx(), in.surface.ny()});
+    m["rays_per_second"] = r.seconds > 0 ? double(r.rays) / r.seconds : 0.0;
+    m["mesh"] = json::array({r.surface.nx(), r.surface.ny()});
     m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
-    if (in.mesh || !scene.meshes.empty())
+    if (job.mesh || !scene.meshes.empty())
         m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
-    if (in.mesh)
-        m["mesh_material"] = in.mesh_material ? json{{"refractive", in.mesh_material->ior}}
-                                              : json("the scene's surface material");
-    if (in.target) {
-        m["error"] = l1_error(r.histogram, make_target(*in.target, scene.receiver.width, scene.receiver.height,
-                                                       target_total(rays, make_path_params(scene))));
-        m["error_physical"] = cells->error;
-        m["energy_physical"] = cells->totals.energy();
-        m["cell_means"] = io::cell_means_json(*cells, in.mesh ? "the mesh, as rendered" : "the surface, as rendered");
+    if (job.mesh)
+        m["mesh_material"] = job.mesh_material ? json{{"refractive", job.mesh_material->ior}}
+                                               : json("the scene's surface material");
+    if (r.cells) {
+        m["error"] = *r.error;
+        m["error_physical"] = r.cells->error;
+        m["energy_physical"] = r.cells->totals.energy();
+        m["cell_means"] = io::cell_means_json(*r.cells, job.mesh ? "the mesh, as rendered" : "the surface, as rendered");
     }
-    if (in.start) m["start"] = io::start_report_json(*in.start);
+    if (r.start) m["start"] = io::start_report_json(*r.start);
     m["effective_scene"] = scene_to_json(scene);
     return m;
 }
@@ -484,34 +372,31 @@ int run_render(const RenderArgs& a) {
     // Under mpirun every rank would render the same: rank 0 does it alone.
     if (world_rank != 0) return 0;
     const Limits limits = parse_limits(a.limits);
-    const RenderInputs in = render_inputs(a, limits);
-    const Scene& scene = in.scene;
+    RenderRequest job = render_request(a, limits);
     StatusLine status(true);
-    RaySet rays = generate_rays(scene.light, in.surface, scene.receiver, scene.optimise.seed);
-    const RenderOutcome r = trace_render(in, a, scene, rays, status);
-    // With a target: the cell means of what was rendered (error_physical, docs/measures.md).
-    std::optional<CellMeans> cells;
-    if (in.target)
-        cells = converged_cell_means(scene, in.surface, &*in.target, physical_cell_mean_options(scene.optimise.seed),
-                                     [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
-                                         RaySet own = batch;
-                                         RenderOutcome o = trace_render(in, a, sc, own, status);
-                                         h = std::move(o.histogram);
-                                         tt = o.totals;
-                                     });
-    const json m = render_metrics(a, in, rays, r, cells);
-    write_render_outputs(a.out, m, r.histogram, cells);
-    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(in.decision.tracer),
-                in.decision.reason.c_str());
-    if (cells)
+    const auto t0 = std::chrono::steady_clock::now();
+    RenderCallbacks callbacks;
+    callbacks.progress = [&](std::int64_t traced, std::int64_t total) {
+        if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > 1.0)
+            status.show("tracing " + bar(double(traced) / double(total)) + " " + std::to_string(traced) + "/" +
+                        std::to_string(total) + " rays");
+    };
+    callbacks.phase = [&](const std::string& what) { status.show(what); };
+    const RenderResult r = render(job, callbacks);
+    status.finish();
+    const json m = render_metrics(a, job, r);
+    write_render_outputs(a.out, m, r.histogram, r.cells);
+    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(r.decision.tracer),
+                r.decision.reason.c_str());
+    if (r.cells)
         std::printf("  error_physical %.4f, energy %.4f: cell means, nearest deposit, %.0f rays per cell\n",
-                    cells->error, cells->totals.energy(), cells->rays_per_cell);
-    std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)rays.size(),
-                r.totals.energy(), in.target ? (", error " + fixed(m["error"].get<double>(), 4)).c_str() : "",
-                r.seconds, m["rays_per_second"].get<double>() / 1e6);
-    if (in.start)
-        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", in.start->used.c_str(),
-                    in.start->flat_error);
+                    r.cells->error, r.cells->totals.energy(), r.cells->rays_per_cell);
+    std::printf("  %lld rays, energy on the receiver %.4f%s, %.3f s (%.1f M rays/s)\n", (long long)r.rays,
+                r.totals.energy(), r.error ? (", error " + fixed(*r.error, 4)).c_str() : "", r.seconds,
+                m["rays_per_second"].get<double>() / 1e6);
+    if (r.start)
+        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", r.start->used.c_str(),
+                    r.start->flat_error);
     std::printf("  results in %s/\n", a.out.string().c_str());
     return 0;
 }

@@ -1,7 +1,8 @@
 #pragma once
-// Umbrella header of the design module: a whole design in one call (pipeline.hpp), and
-// its parts — the problem the annealer solves, the designer's levels and stages, the
-// start, held-out checks, the export, its cell means and the machinist's report.
+// Umbrella header of the design module: a whole design in one call (pipeline.hpp), a
+// render in one call (render.hpp), and their parts — the problem the annealer solves,
+// the designer's levels and stages, the start, held-out checks, the export, its cell
+// means and the machinist's report.
 #include "design/cell_means.hpp"
 #include "design/designer.hpp"
 #include "design/fabrication.hpp"
@@ -10,6 +11,7 @@
 #include "design/machining.hpp"
 #include "design/pipeline.hpp"
 #include "design/problem.hpp"
+#include "design/render.hpp"
 #include "design/replicas.hpp"
 #include "design/resources.hpp"
 #include "design/start.hpp"
