@@ -481,7 +481,7 @@ TEST_CASE("replicas share the start: made once, and a replica handed it designs 
     SmallCase c = small_case();
     c.scene.target = TargetSpec{};  // a transport start, fitted again on the 9² first level
     const DesignResult plain = run(c, c.options);
-    REQUIRE(plain.start.used == "transport");
+    REQUIRE(plain.start.used == StartKind::transport);
 
     StartMaker maker;
     const DesignResult made = design(c.scene, surface_for(c.scene, SmallCase::mesh), c.target, c.options,
@@ -537,7 +537,7 @@ TEST_CASE("a callback returning true stops the design; the result holds a valid 
         });
         CHECK(r.stopped_early);
         CHECK(r.iterations == last_level_start + 200);
-        CHECK(r.stages.back().stop_reason == "callback");
+        CHECK(r.stages.back().stop_reason == StopReason::callback);
         CHECK(r.stages.back().level == 1);
         CHECK(calls >= 8);
 
@@ -570,7 +570,7 @@ TEST_CASE("a callback returning true stops the design; the result holds a valid 
         CHECK(r.stopped_early);
         CHECK(r.iterations == o.preprocess_iterations + 100);
         REQUIRE(r.stages.size() == 1);
-        CHECK(r.stages[0].stop_reason == "callback");
+        CHECK(r.stages[0].stop_reason == StopReason::callback);
         // The surface has the final mesh so that exports have the size asked for.
         REQUIRE(r.surface.nx() == SmallCase::mesh);
         REQUIRE(r.surface.ny() == SmallCase::mesh);
@@ -680,11 +680,11 @@ TEST_CASE("a time-budgeted design uses its whole budget: the last stage runs unt
     o.threads = 1;
     const DesignResult r = design(s, surface_for(s, 21), target, o, never_stop());
     REQUIRE(!r.stages.empty());
-    CHECK(r.stages.back().stop_reason == "time_budget");
+    CHECK(r.stages.back().stop_reason == StopReason::time_budget);
     CHECK(r.seconds >= 0.95 * o.time_budget);
     // Earlier stages still end on their budgets or their share of the time.
     for (std::size_t k = 0; k + 1 < r.stages.size(); ++k) {
         CAPTURE(k);
-        CHECK((r.stages[k].stop_reason == "max_iterations" || r.stages[k].stop_reason == "time_budget"));
+        CHECK((r.stages[k].stop_reason == StopReason::max_iterations || r.stages[k].stop_reason == StopReason::time_budget));
     }
 }

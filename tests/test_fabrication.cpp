@@ -135,7 +135,7 @@ void check_exported_matches(Scene s, int n, double max_l1) {
     s.receiver.deposit = Deposit::bilinear;
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
     const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1);
-    REQUIRE(st.report.used == "transport");
+    REQUIRE(st.report.used == StartKind::transport);
     const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);
     const Fabrication f = make_fabrication(s, st.surface);

@@ -138,7 +138,7 @@ TEST_CASE("machining report on a design's start surface agrees with quadratic fi
     const ImageD target = testing::two_blocks(100, 100);
     DesignStart start = make_design_start(scene, testing::surface_for(scene, 101), target, 1, 2);
     const MachiningReport r = machining_report(scene, start.surface, {});
-    REQUIRE(start.report.used == "transport");
+    REQUIRE(start.report.used == StartKind::transport);
     REQUIRE(r.min_concave_radius.has_value());
     const double independent = independent_min_concave_radius(start.surface, 0);
     // The cutter meets the surface at its finest scale: quadratic fits over 3 x 3 and 5 x 5

@@ -465,7 +465,7 @@ TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the desig
     s.target = TargetSpec{};
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
     const DesignStart st = make_design_start(s, surface_for(s, 51), target, 3, 1);
-    REQUIRE(st.report.used == "transport");
+    REQUIRE(st.report.used == StartKind::transport);
     const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);
 

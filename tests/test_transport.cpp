@@ -177,7 +177,7 @@ namespace {
 // Error of the transport start of `s` (and of a flat surface) under the exact tracer.
 std::pair<double, double> start_and_flat_error(const Scene& s, const ImageD& target, int mesh) {
     const DesignStart st = make_design_start(s, testing::surface_for(s, mesh), target, 3, 1);
-    REQUIRE(st.report.used == "transport");
+    REQUIRE(st.report.used == StartKind::transport);
     return {st.report.error, st.report.flat_error};
 }
 
@@ -246,7 +246,7 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
     o.max_iterations = 3000;
     o.threads = 1;
     const DesignResult r = design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; });
-    CHECK(r.start.used == "transport");
+    CHECK(r.start.used == StartKind::transport);
     CHECK(r.start.levels_planned >= r.start.levels_used);
     CHECK(r.start.levels_used >= 1);
     CHECK(r.start.error == doctest::Approx(a.report.error));
@@ -255,7 +255,7 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
     // "flat" is still a start of its own.
     Scene flat_scene = s;
     flat_scene.surface.initial_shape = InitialShape::flat;
-    CHECK(make_design_start(flat_scene, testing::surface_for(s, 31), target, 5, 1).report.used == "flat");
+    CHECK(make_design_start(flat_scene, testing::surface_for(s, 31), target, 5, 1).report.used == StartKind::flat);
 }
 
 TEST_CASE("transport start: scenes it cannot model fall back to flat and say why") {
@@ -263,8 +263,8 @@ TEST_CASE("transport start: scenes it cannot model fall back to flat and say why
     s.target = TargetSpec{};
     s.meshes.push_back(MeshSpec{"wall.obj", MeshMaterial::absorber()});
     const DesignStart st = make_design_start(s, testing::surface_for(s, 21), two_blocks(40, 40), 1, 1);
-    CHECK(st.report.requested == "transport");
-    CHECK(st.report.used == "flat");
+    CHECK(st.report.requested == StartKind::transport);
+    CHECK(st.report.used == StartKind::flat);
     CHECK(st.report.fallback_reason.find("meshes") != std::string::npos);
 }
 

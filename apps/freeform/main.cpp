@@ -395,7 +395,7 @@ int run_render(const RenderArgs& a) {
                 r.totals.energy(), r.error ? (", error " + fixed(*r.error, 4)).c_str() : "", r.seconds,
                 m["rays_per_second"].get<double>() / 1e6);
     if (r.start)
-        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", r.start->used.c_str(),
+        std::printf("  traced the scene's start: %s (a flat surface: error %.4f)\n", to_string(r.start->used),
                     r.start->flat_error);
     std::printf("  results in %s/\n", a.out.string().c_str());
     return 0;
@@ -518,10 +518,10 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                           .c_str()
                     : "");
     const StartReport& st = result.start;
-    std::printf("  start: %s%s%s", st.used.c_str(),
+    std::printf("  start: %s%s%s", to_string(st.used),
                 st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
                 st.fallback_reason.empty() ? "" : (" (transport not used: " + st.fallback_reason + ")").c_str());
-    if (st.used == "transport" && st.transport.height_excess > 0)
+    if (st.used == StartKind::transport && st.transport.height_excess > 0)
         std::printf("; it needs %.1f mm of height range, surface.height_bounds allow %.1f mm, so it was clamped "
                     "(widen the bounds to keep the whole map)",
                     st.transport.height_range * 1e3,
@@ -672,7 +672,7 @@ int run_design(const DesignArgs& a) {
             }
             return progress(p);
         };
-        callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+        callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
         DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
                                      callbacks.progress, default_penalties(plan.scene.optimise, scene.surface.tool_radius),
                                      *replicas);

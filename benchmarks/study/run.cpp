@@ -166,7 +166,7 @@ int run(const Args& a) {
         // One trace point: the start's error and energy as the library measured them (run
         // seed, final receiver resolution; the objective is not computed there: 0).
         if (s.report.error >= 0) trace.push_back({seconds, 0, 0, s.report.error, s.report.energy, 0.0});
-        model["start"] = s.report.used;
+        model["start"] = to_string(s.report.used);
         result_surface = std::move(s.surface);
     } else if (a.engine == "design") {
         DesignOptions o = run_scene.optimise;
@@ -201,7 +201,7 @@ int run(const Args& a) {
         out["kernel_shapes"] = to_string(o.kernel_shapes);
         out["max_iterations"] = o.max_iterations;
         out["stop_reasons"] = json::array();
-        for (const auto& s : r.stages) out["stop_reasons"].push_back(s.stop_reason);
+        for (const auto& s : r.stages) out["stop_reasons"].push_back(to_string(s.stop_reason));
         out["bandit_weights"] = r.bandit_weights;
         json bank = json::array();
         for (const auto& k : r.kernel_bank) {
@@ -230,7 +230,7 @@ int run(const Args& a) {
                                            {"kernels", json::array()}});
         for (const auto& s : r.stages) model["levels"][std::size_t(s.level)]["kernels"].push_back(s.kernel_support);
         model["rays"] = r.rays;
-        model["start"] = r.start.used;
+        model["start"] = to_string(r.start.used);
         result_surface = std::move(r.surface);
     } else {
         if (a.start_only) throw InputError("--start-only: only with --engine design");

@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
         });
         const SharedStart own = make();
         expect(calls == (rank == 0 ? 1 : 0), "make() runs on rank 0 alone");
-        expect(own.transport && own.report.used == "transport", "the case starts from the transport surface");
+        expect(own.transport && own.report.used == StartKind::transport, "the case starts from the transport surface");
         expect(levels.size() >= 2 && own.surface.nx() == levels.front().mesh_x && own.surface.nx() != 31,
                "the start is on the first level's mesh");
         check_same_start(got, own, rank0_seconds(got));

@@ -59,7 +59,7 @@ struct StageReport {
     double error_start = 0, error_end = 0, energy_end = 0, objective_end = 0;
     std::int64_t rays = 0;
     std::vector<double> bandit_weights;
-    std::string stop_reason;
+    StopReason stop_reason = StopReason::max_iterations;
     // Held-out checks (held_out.hpp; all -1 / 0 when optimise.held_out_checks is off).
     double held_out_start = -1;  // error of the stage's start on the held-out rays
     double held_out_end = -1;    // ... of the state the stage ends with
@@ -773,7 +773,7 @@ class Designer {
         report.energy_end = problem.value().energy;
         report.objective_end = problem.value().total;
         report.bandit_weights = options_.single_vertex ? std::vector<double>{} : problem.bandit().weights();
-        report.stop_reason = to_string(ar.reason);
+        report.stop_reason = ar.reason;
         result_.stages.push_back(report);
         // With replicas, every replica goes on to the next stage, or none does.
         result_.stopped_early = replicas_.any(stopped);

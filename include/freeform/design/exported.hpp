@@ -54,9 +54,9 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometr
         pp.material = MaterialView{};
         std::vector<ExtraMesh> meshes;
         meshes.push_back(ExtraMesh{geometry.mesh, MeshMaterial::refractive(*geometry.solid_ior)});
-        tracer.emplace(lens_rays, pp, std::move(meshes));
+        tracer.emplace(lens_rays, pp, std::move(meshes), thread_count(policy));
     } else {
-        tracer.emplace(geometry.mesh, rays, pp);
+        tracer.emplace(geometry.mesh, rays, pp, std::vector<ExtraMesh>{}, thread_count(policy));
     }
     ExportedTrace out{Histogram(scene.receiver.width, scene.receiver.height), {}};
     tracer->trace_all(policy, out.histogram, out.totals);

@@ -80,7 +80,7 @@ inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> in
         p.initial = initial_surface(p.scene, nx, ny);
     }
     // A transport start the scene asks for by name must be possible: say so before any work.
-    if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == "transport")
+    if (scene.surface.initial_shape == InitialShape::transport && requested_start(scene) == StartKind::transport)
         flat_footprint(p.scene, p.initial);
     return p;
 }
@@ -182,7 +182,7 @@ inline CompletedDesign finish_design(const Scene& scene, DesignResult result, co
 // irradiance, any resolution: io::load_target_image makes it from the scene's target
 // block).
 inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+    if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
     const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
     DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise, progress);
     return finish_design(plan.scene, std::move(result), target, callbacks);
@@ -198,7 +198,7 @@ inline CompletedDesign design(const Scene& scene, const ImageD& target, const De
 // The start alone (the transport surface, or whatever the scene starts from), judged and
 // finished like a design but not annealed: what `freeform design --start-only` writes.
 inline CompletedDesign design_start(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase("finding the start (" + requested_start(plan.scene) + ")");
+    if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
     const auto t0 = std::chrono::steady_clock::now();
     DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.scene.optimise.seed,
                                           thread_count(exec::omp_t{plan.scene.optimise.threads}));

@@ -154,16 +154,16 @@ inline double trace_job(const RenderRequest& job, const Heightmap& surface, Trac
         ExtraMesh solid = to_surface_frame(*job.mesh, sc.surface.frame, *job.mesh_material);
         start_above(sc.light, sc.surface.size, solid.mesh, rays);
         extras.insert(extras.begin(), std::move(solid));
-        return trace_in_chunks(EmbreeTracer(rays, pp, std::move(extras)), rays, threads, callbacks, histogram,
-                               totals);
+        return trace_in_chunks(EmbreeTracer(rays, pp, std::move(extras), threads), rays, threads, callbacks,
+                               histogram, totals);
     }
     if (job.mesh) {
         const ExtraMesh local = to_surface_frame(*job.mesh, sc.surface.frame, true);
-        return trace_in_chunks(EmbreeTracer(local.mesh, rays, pp, std::move(extras)), rays, threads, callbacks,
-                               histogram, totals);
+        return trace_in_chunks(EmbreeTracer(local.mesh, rays, pp, std::move(extras), threads), rays, threads,
+                               callbacks, histogram, totals);
     }
-    return trace_in_chunks(EmbreeTracer(surface, rays, pp, std::move(extras)), rays, threads, callbacks, histogram,
-                           totals);
+    return trace_in_chunks(EmbreeTracer(surface, rays, pp, std::move(extras), 32, EmbreeTileLayout::instanced, threads),
+                           rays, threads, callbacks, histogram, totals);
 #else
     (void)sc, (void)rays, (void)threads, (void)callbacks, (void)histogram, (void)totals;
     throw InputError("the Embree tracer is not in this build");  // choose_tracer refuses it first
@@ -199,7 +199,7 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
     // surface (the grid only places the rays).
     if (job.surface_is_scene_start && job.target && !job.mesh && starts_from_transport(scene) &&
         scene.meshes.empty()) {
-        if (callbacks.phase) callbacks.phase("finding the start (" + requested_start(scene) + ")");
+        if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(scene)) + ")");
         if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, job.surface);
         DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, scene.optimise.seed, r.threads);
         r.start = st.report;

@@ -2,6 +2,7 @@
 // Where a design starts: the caller's surface (flat, a heightmap, a paraboloid) or the
 // transport surface (transport/start.hpp), judged by the exact tracer. The designer uses
 // the measured error to decide how much coarse work the schedule still needs.
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -18,9 +19,14 @@
 
 namespace freeform {
 
+// What a design starts from; metrics.json names it (start_kind_names).
+enum class StartKind { flat, transport, heightmap, paraboloid };
+inline constexpr std::array<const char*, 4> start_kind_names{"flat", "transport", "heightmap", "paraboloid"};
+inline const char* to_string(StartKind k) { return start_kind_names[std::size_t(k)]; }
+
 struct StartReport {
-    std::string requested = "flat";  // what the scene asked for: flat, transport, heightmap, paraboloid
-    std::string used = "flat";       // what the design started from
+    StartKind requested = StartKind::flat;  // what the scene asked for
+    StartKind used = StartKind::flat;       // what the design started from
     std::string fallback_reason;     // why a requested transport start was not used
     TransportReport transport;       // when a transport start was attempted
     double error = -1, energy = -1;  // of the start, exact tracer at the final level (-1: not measured)
@@ -48,11 +54,11 @@ inline SurfaceEvaluation evaluate_surface(const Scene& scene, const Heightmap& s
     return {l1_error(hist, t), totals.energy()};
 }
 
-inline std::string requested_start(const Scene& scene) {
+inline StartKind requested_start(const Scene& scene) {
     const SurfaceSpec& s = scene.surface;
-    if (!s.initial_pfm.empty()) return "heightmap";
-    if (s.initial_paraboloid) return "paraboloid";
-    return starts_from_transport(scene) ? "transport" : "flat";
+    if (!s.initial_pfm.empty()) return StartKind::heightmap;
+    if (s.initial_paraboloid) return StartKind::paraboloid;
+    return starts_from_transport(scene) ? StartKind::transport : StartKind::flat;
 }
 
 // The start of a design on the final mesh of `initial` (the caller's surface). For a
@@ -86,12 +92,12 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     DesignStart start;
     start.report.requested = requested_start(scene);
     start.report.used = start.report.requested;
-    if (start.report.requested != "transport") {
+    if (start.report.requested != StartKind::transport) {
         start.surface = std::move(initial);
         return start;
     }
     const auto fall_back = [&](std::string why) {
-        start.report.used = "flat";
+        start.report.used = StartKind::flat;
         start.report.fallback_reason = std::move(why);
         start.map.reset();
         start.surface = std::move(initial);

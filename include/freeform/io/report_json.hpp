@@ -32,7 +32,7 @@ inline nlohmann::json stage_report_json(const StageReport& s) {
             {"error_start", s.error_start},
             {"error_end", s.error_end},
             {"energy_end", s.energy_end},
-            {"stop", s.stop_reason},
+            {"stop", to_string(s.stop_reason)},
             {"bandit_weights", s.bandit_weights}};
     if (s.held_out_start >= 0)
         j["held_out"] = {{"error_start", s.held_out_start},
@@ -47,8 +47,8 @@ inline nlohmann::json stage_report_json(const StageReport& s) {
 // transport solve and fit, the start's error under the exact tracer, and the schedule's
 // decision.
 inline nlohmann::json start_report_json(const StartReport& s) {
-    nlohmann::json j{{"requested", s.requested},
-                     {"used", s.used},
+    nlohmann::json j{{"requested", to_string(s.requested)},
+                     {"used", to_string(s.used)},
                      {"seconds", s.seconds},
                      {"levels_planned", s.levels_planned},
                      {"levels_used", s.levels_used},
@@ -56,7 +56,7 @@ inline nlohmann::json start_report_json(const StartReport& s) {
     if (!s.fallback_reason.empty()) j["fallback_reason"] = s.fallback_reason;
     if (s.error >= 0) j["error"] = s.error, j["energy"] = s.energy;
     if (s.flat_error >= 0) j["flat_error"] = s.flat_error;
-    if (s.requested == "transport" && s.transport.grid_x > 0) {
+    if (s.requested == StartKind::transport && s.transport.grid_x > 0) {
         const TransportReport& t = s.transport;
         j["transport"] = {{"grid", nlohmann::json::array({t.grid_x, t.grid_y})},
                           {"cell_size", t.cell_size},

@@ -246,7 +246,7 @@ inline std::vector<char> pack_result(const DesignResult& r) {
         p.put(s.held_out_start), p.put(s.held_out_end), p.put(s.held_out_checks), p.put(s.held_out_kept);
         p.put(s.merges);
         p.put_vector(s.bandit_weights);
-        p.put_string(s.stop_reason);
+        p.put(s.stop_reason);
     }
     p.put_vector(r.convergence);
     p.put_vector(r.kernel_bank);
@@ -286,7 +286,7 @@ inline void unpack_result(const std::vector<char>& bytes, DesignResult& r) {
         s.held_out_checks = u.get<std::int64_t>(), s.held_out_kept = u.get<std::int64_t>();
         s.merges = u.get<std::int64_t>();
         s.bandit_weights = u.get_vector<double>();
-        s.stop_reason = u.get_string();
+        s.stop_reason = u.get<StopReason>();
     }
     r.convergence = u.get_vector<ConvergencePoint>();
     r.kernel_bank = u.get_vector<KernelShape>();
@@ -323,7 +323,7 @@ inline void pack_start(Packer& p, const SharedStart& s) {
     p.put(h.aperture());
     p.put_vector(h.heights());
     const StartReport& r = s.report;
-    p.put_string(r.requested), p.put_string(r.used), p.put_string(r.fallback_reason);
+    p.put(r.requested), p.put(r.used), p.put_string(r.fallback_reason);
     pack_transport_report(p, r.transport);
     p.put(r.error), p.put(r.energy), p.put(r.flat_error), p.put(r.seconds);
     p.put(r.levels_planned), p.put(r.levels_used);
@@ -341,7 +341,7 @@ inline SharedStart unpack_start(Unpacker& u) {
     s.surface = Heightmap(nx, ny, size, h_min, h_max, frame, aperture);
     s.surface.set_heights(u.get_vector<float>());
     StartReport& r = s.report;
-    r.requested = u.get_string(), r.used = u.get_string(), r.fallback_reason = u.get_string();
+    r.requested = u.get<StartKind>(), r.used = u.get<StartKind>(), r.fallback_reason = u.get_string();
     unpack_transport_report(u, r.transport);
     r.error = u.get<double>(), r.energy = u.get<double>(), r.flat_error = u.get<double>();
     r.seconds = u.get<double>();

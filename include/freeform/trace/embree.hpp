@@ -102,6 +102,11 @@ inline void start_above(const Light& light, Vec2d surface_size, const TriangleMe
 // boundary.
 class EmbreeDevice {
 public:
+    // `build_threads`: the threads Embree may use to build its BVHs (its "threads=N"
+    // device setting); 0: every hardware thread, Embree's default.
+    explicit EmbreeDevice(int build_threads)
+        : EmbreeDevice(build_threads > 0 ? ("threads=" + std::to_string(build_threads)).c_str() : nullptr) {}
+
     explicit EmbreeDevice(const char* config = nullptr) : log_(std::make_unique<ErrorLog>()) {
         device_.reset(rtcNewDevice(config));
         if (!device_) {
@@ -303,10 +308,14 @@ public:
     // Traces `surface` (split into tiles of tile_cells × tile_cells cells) and `meshes`
     // (surface frame). The tracer keeps references to `surface` and `rays`: both must
     // outlive it, and every height change must be followed by surface_changed().
+    // `build_threads` (every constructor): the threads Embree builds and refits its BVHs
+    // with, 0 for all; a design passes its own thread count (the rays themselves are
+    // traced by the policy given to trace()).
     EmbreeTracer(const Heightmap& surface, const RaySet& rays, const PathParams& params,
                  std::vector<ExtraMesh> meshes = {}, int tile_cells = 32,
-                 EmbreeTileLayout layout = EmbreeTileLayout::instanced)
-        : surface_(&surface), rays_(&rays), params_(params), tile_cells_(tile_cells), layout_(layout) {
+                 EmbreeTileLayout layout = EmbreeTileLayout::instanced, int build_threads = 0)
+        : device_(build_threads), surface_(&surface), rays_(&rays), params_(params), tile_cells_(tile_cells),
+          layout_(layout) {
         if (tile_cells < 1)
             throw InputError("EmbreeTracer: tile_cells must be at least 1, got " + std::to_string(tile_cells));
         const std::int64_t tris = 2 * std::int64_t(surface.nx() - 1) * (surface.ny() - 1);
@@ -320,8 +329,8 @@ public:
     // when missing) in place of a height field, with the scene's material: a mirror, or
     // the front face of a lens. Only `rays` is referenced, the meshes are copied.
     EmbreeTracer(const TriangleMesh& surface_mesh, const RaySet& rays, const PathParams& params,
-                 std::vector<ExtraMesh> meshes = {})
-        : surface_(nullptr), rays_(&rays), params_(params), tile_cells_(0) {
+                 std::vector<ExtraMesh> meshes = {}, int build_threads = 0)
+        : device_(build_threads), surface_(nullptr), rays_(&rays), params_(params), tile_cells_(0) {
         create_scene();
         TriangleMesh m = surface_mesh;
         if (m.normals.empty()) m.compute_normals();
@@ -348,8 +357,8 @@ public:
 
     // Traces `meshes` alone (surface frame), with no designed surface: a lens solid given
     // as a refractive mesh, say, lit by the scene's rays. Only `rays` is referenced.
-    EmbreeTracer(const RaySet& rays, const PathParams& params, std::vector<ExtraMesh> meshes)
-        : surface_(nullptr), rays_(&rays), params_(params), tile_cells_(0) {
+    EmbreeTracer(const RaySet& rays, const PathParams& params, std::vector<ExtraMesh> meshes, int build_threads = 0)
+        : device_(build_threads), surface_(nullptr), rays_(&rays), params_(params), tile_cells_(0) {
         if (meshes.empty()) throw InputError("EmbreeTracer: no mesh to trace");
         create_scene();
         add_meshes(std::move(meshes), 0);
