@@ -243,62 +243,25 @@ inline void intersect_filter(const RTCFilterFunctionNArguments* args) {
 }
 
 // Calls visit(ci, cj) for every cell the segment o + t·d, 0 <= t <= t_end, crosses inside
-// the slab and the grid, in walking order. Used to tell which rays a height change in a
-// patch can affect; it errs on the side of visiting one cell too many.
+// the slab and the grid, in walking order: the height-field tracer's walk
+// (hf_detail::walk_cells), so both tracers index a ray by the same cells. Used to tell
+// which rays a height change in a patch can affect; it errs on the side of visiting one
+// cell too many, and reports no height range (Embree's hits are not the walk's).
 template <class Visitor>
 inline void visit_slab_cells(const HeightfieldView& hf, Vec3 o, Vec3 d, float t_end, Visitor&& visit) {
-    const float inf = std::numeric_limits<float>::infinity();
-    float t0 = 0.0f, t1 = t_end;
-    if (d.z != 0.0f) {
-        const float ta = (hf.h_min - o.z) / d.z, tb = (hf.h_max - o.z) / d.z;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.z < hf.h_min || o.z > hf.h_max) {
-        return;
-    }
-    const float u1 = hf.u0 + float(hf.nx - 1) * hf.du, v1 = hf.v0 + float(hf.ny - 1) * hf.dv;
-    if (d.x != 0.0f) {
-        const float ta = (hf.u0 - o.x) / d.x, tb = (u1 - o.x) / d.x;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.x < hf.u0 || o.x > u1) {
-        return;
-    }
-    if (d.y != 0.0f) {
-        const float ta = (hf.v0 - o.y) / d.y, tb = (v1 - o.y) / d.y;
-        t0 = max_f(t0, min_f(ta, tb));
-        t1 = min_f(t1, max_f(ta, tb));
-    } else if (o.y < hf.v0 || o.y > v1) {
-        return;
-    }
-    if (!(t0 <= t1)) return;
-    const Vec3 e = o + t0 * d;
-    const float inv_du = 1.0f / hf.du, inv_dv = 1.0f / hf.dv;
-    const float gx = (e.x - hf.u0) * inv_du, gy = (e.y - hf.v0) * inv_dv;
-    int ci = std::clamp(floor_i(gx), 0, hf.nx - 2);
-    int cj = std::clamp(floor_i(gy), 0, hf.ny - 2);
-    const float ad = d.x * inv_du, bd = d.y * inv_dv;
-    const int step_i = ad > 0.0f ? 1 : -1, step_j = bd > 0.0f ? 1 : -1;
-    const float dt_i = ad != 0.0f ? std::fabs(1.0f / ad) : inf;
-    const float dt_j = bd != 0.0f ? std::fabs(1.0f / bd) : inf;
-    float tn_i = ad != 0.0f ? (float(ci + (ad > 0.0f ? 1 : 0)) - gx) / ad : inf;
-    float tn_j = bd != 0.0f ? (float(cj + (bd > 0.0f ? 1 : 0)) - gy) / bd : inf;
-    // A hit computed by Embree may sit a rounding error past a cell border: walk a little
-    // beyond the end so that its cell is always visited.
-    const float t_len = (t1 - t0) + 1e-4f * min_f(min_f(dt_i, dt_j), 1.0f);
-    while (true) {
+    const hf_detail::Grid g = hf_detail::grid_of(hf);
+    // A hit computed by Embree may sit a rounding error past a cell border: walk a ten
+    // thousandth of a cell (or of a unit of t) beyond the end so that its cell is visited.
+    const float ad = fabsf(d.x * g.inv_du), bd = fabsf(d.y * g.inv_dv);
+    float t_per_cell = 1.0f;
+    if (ad > 0.0f) t_per_cell = min_f(t_per_cell, 1.0f / ad);
+    if (bd > 0.0f) t_per_cell = min_f(t_per_cell, 1.0f / bd);
+    hf_detail::GridSegment s;
+    if (!hf_detail::grid_segment(hf, g, o, d, t_end, 1e-4f * t_per_cell, s)) return;
+    hf_detail::walk_cells(g, s, [&](int ci, int cj, float, float) {
         visit(ci, cj);
-        if (min_f(tn_i, tn_j) >= t_len) return;
-        if (tn_i < tn_j) {
-            ci += step_i;
-            if (ci < 0 || ci > hf.nx - 2) return;
-            tn_i += dt_i;
-        } else {
-            cj += step_j;
-            if (cj < 0 || cj > hf.ny - 2) return;
-            tn_j += dt_j;
-        }
-    }
+        return false;
+    });
 }
 
 }  // namespace embree_detail

@@ -251,21 +251,26 @@ FREEFORM_HD FREEFORM_FORCE_INLINE bool cell_hit(const View& hf, const Grid& g, i
     return true;
 }
 
-// The nearest admissible hit of the segment (o, d) on the front (Front) or back side:
-// sets `hit` (kind surface) and returns true, or returns false and leaves `hit` alone.
-//
-// The walk runs in grid units (x = (u - u0)/du, y = (v - v0)/dv, the grid is
-// [0, nx-1] x [0, ny-1]). The segment is the ray inside the slab; it leaves the grid
-// when the walk steps off it. A segment that stays over one cell (light arriving
-// steeply, light leaving a mirror steeply) is tested without setting up the walk. Cell
-// crossings are multiplications by the reciprocal direction, recomputed from the grid
-// line rather than accumulated, so that long walks do not drift.
-template <bool Front, class View, class Visitor>
-FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std::int32_t exclude, Visitor& visit,
-                             SurfaceHit& hit) {
-    const float inf = INFINITY;
+// The part of a ray over the grid, inside the slab, in grid units (x = (u - u0)/du,
+// y = (v - v0)/dv; the grid is [0, nx-1] x [0, ny-1]). The ray is re-based at the
+// segment's start so that cell-local arithmetic stays small.
+struct GridSegment {
+    float gx = 0, gy = 0;  // start, grid units
+    float ez = 0;          // height at the start
+    float ad = 0, bd = 0;  // grid units per unit t
+    float t0 = 0;          // where the segment starts on the ray
+    float t_len = 0;       // its length in t
+};
+
+// Clips the ray (o, d), t in [0, t_limit], to the slab and the grid rectangle; the
+// segment's length is extended by `t_slack` past its end (a walk that must reach the
+// cell of a hit found by another tracer, a rounding error beyond it). False when the
+// ray misses.
+template <class View>
+FREEFORM_HD FREEFORM_FORCE_INLINE bool grid_segment(const View& hf, const Grid& g, Vec3 o, Vec3 d, float t_limit,
+                                                    float t_slack, GridSegment& s) {
     // Slab interval.
-    float t0 = 0.0f, t1 = inf;
+    float t0 = 0.0f, t1 = INFINITY;
     if (d.z != 0.0f) {
         const float r = 1.0f / d.z;
         const float ta = (hf.h_min - o.z) * r, tb = (hf.h_max - o.z) * r;
@@ -275,15 +280,32 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
     } else if (!(o.z >= hf.h_min && o.z <= hf.h_max)) {
         return false;
     }
-    const float ad = d.x * g.inv_du, bd = d.y * g.inv_dv;  // grid units per unit t
+    if (t_limit < t1) t1 = t_limit;
+    if (!(t0 <= t1)) return false;
+    s.ad = d.x * g.inv_du, s.bd = d.y * g.inv_dv;
     const float gox = (o.x - hf.u0) * g.inv_du, goy = (o.y - hf.v0) * g.inv_dv;
-    // Re-base the ray at the start of the segment so that cell-local arithmetic stays small.
-    float gx = gox + ad * t0, gy = goy + bd * t0;
-    if (!(gx >= 0.0f && gx <= g.x_max && gy >= 0.0f && gy <= g.y_max) &&
-        !clip_to_grid(g, gox, goy, ad, bd, t0, t1, gx, gy))
+    s.gx = gox + s.ad * t0, s.gy = goy + s.bd * t0;
+    if (!(s.gx >= 0.0f && s.gx <= g.x_max && s.gy >= 0.0f && s.gy <= g.y_max) &&
+        !clip_to_grid(g, gox, goy, s.ad, s.bd, t0, t1, s.gx, s.gy))
         return false;
-    const float ez = o.z + d.z * t0;
-    const float t_len = t1 - t0;
+    s.ez = o.z + d.z * t0;
+    s.t0 = t0;
+    s.t_len = (t1 - t0) + t_slack;
+    return true;
+}
+
+// The one grid traversal (the SIMD packet walk of trace/packet.hpp is its tested twin):
+// calls on_cell(ci, cj, tc, tc_end) for every cell the segment crosses, in walking order,
+// with [tc, tc_end] the part over the cell (t from the segment's start), until on_cell
+// returns true (then returns true) or the segment leaves the grid or ends. A segment
+// that stays over one cell (light arriving steeply, light leaving a mirror steeply) is
+// handed over without setting up the walk. Cell crossings are multiplications by the
+// reciprocal direction, recomputed from the grid line rather than accumulated, so that
+// long walks do not drift.
+template <class OnCell>
+FREEFORM_HD FREEFORM_FORCE_INLINE bool walk_cells(const Grid& g, const GridSegment& s, OnCell&& on_cell) {
+    const float inf = INFINITY;
+    const float gx = s.gx, gy = s.gy, ad = s.ad, bd = s.bd, t_len = s.t_len;
     // gx, gy >= 0 here: truncation is floor.
     int ci = int(gx), cj = int(gy);
     ci = ci > g.last_ci ? g.last_ci : ci;
@@ -291,10 +313,7 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
     {
         const float fi = float(ci), fj = float(cj);
         const float ex = gx + ad * t_len, ey = gy + bd * t_len;  // end of the segment
-        if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) {
-            visit_cell(visit, ci, cj, ez + 0.0f * d.z, ez + t_len * d.z);
-            return cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, 0.0f, t_len, t0, exclude, hit);
-        }
+        if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) return on_cell(ci, cj, 0.0f, t_len);
     }
     // Next grid line on each axis and the t (from the segment start) of crossing it; an
     // axis that does not move (1e-30: no 0 * inf below) never crosses one.
@@ -306,10 +325,7 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
     float tc = 0.0f;
     while (true) {
         const float tn = min_f(tn_i, tn_j);
-        const float tc_end = min_f(tn, t_len);
-        visit_cell(visit, ci, cj, ez + tc * d.z, ez + tc_end * d.z);
-        if (cell_hit<Front>(hf, g, ci, cj, gx, gy, ez, ad, bd, d.z, tc, tc_end, t0, exclude, hit))
-            return true;
+        if (on_cell(ci, cj, tc, min_f(tn, t_len))) return true;
         if (tn >= t_len) return false;
         if (tn_i < tn_j) {
             ci += step_i;
@@ -325,6 +341,21 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
             tn_j = (line_j - gy) * rb;
         }
     }
+}
+
+// The nearest admissible hit of the segment (o, d) on the front (Front) or back side:
+// sets `hit` (kind surface) and returns true, or returns false and leaves `hit` alone.
+// Each cell walked over is tested by cell_hit and reported to `visit` with the height
+// range of the walk over it.
+template <bool Front, class View, class Visitor>
+FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std::int32_t exclude, Visitor& visit,
+                             SurfaceHit& hit) {
+    GridSegment s;
+    if (!grid_segment(hf, g, o, d, INFINITY, 0.0f, s)) return false;
+    return walk_cells(g, s, [&](int ci, int cj, float tc, float tc_end) {
+        visit_cell(visit, ci, cj, s.ez + tc * d.z, s.ez + tc_end * d.z);
+        return cell_hit<Front>(hf, g, ci, cj, s.gx, s.gy, s.ez, s.ad, s.bd, d.z, tc, tc_end, s.t0, exclude, hit);
+    });
 }
 
 template <class View, class Visitor>
