@@ -3,6 +3,7 @@
 // results do not depend on the policy.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -60,6 +61,20 @@ TEST_CASE("for_each visits every index exactly once under every policy") {
         CHECK(all_five);
     }
 }
+
+#if defined(_OPENMP)
+// The design's thread count reaches every parallel loop through exec::omp_t (the tracers,
+// the backends' full rebuilds): a team of exactly that size, whatever the machine has.
+TEST_CASE("for_each under exec::omp_t{n} runs a team of n threads") {
+    for (const int threads : {1, 2, 3}) {
+        std::vector<int> team(64, 0);
+        for_each(exec::omp_t{threads}, 64, [&](std::int64_t i) { team[std::size_t(i)] = omp_get_num_threads(); });
+        CHECK(*std::min_element(team.begin(), team.end()) == threads);
+        CHECK(*std::max_element(team.begin(), team.end()) == threads);
+        CHECK(thread_count(exec::omp_t{threads}) == threads);
+    }
+}
+#endif
 
 TEST_CASE("for_each_chunk splits [0, n) into contiguous ranges fixed by n and chunks only") {
     for (const int chunks : {1, 2, 3, 8}) {
