@@ -33,26 +33,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include <freeform/design/cell_means.hpp>
-#include <freeform/design/designer.hpp>
-#include <freeform/design/pipeline.hpp>
-#include <freeform/design/render.hpp>
-#include <freeform/design/fabrication.hpp>
-#include <freeform/design/machining.hpp>
-#include <freeform/design/resources.hpp>
-#include <freeform/io.hpp>
-#include <freeform/io/report_json.hpp>
-#include <freeform/io/scene_file.hpp>
-#include <freeform/io/heightmap.hpp>
-#include <freeform/io/staged_output.hpp>
-#include <freeform/io/target.hpp>
-#include <freeform/objective/target.hpp>
+#include <freeform/freeform.hpp>
 #include <freeform/scene/json.hpp>
-#include <freeform/surface/export.hpp>
-#include <freeform/surface/smooth.hpp>
-#include <freeform/trace/heightfield.hpp>
-#include <freeform/trace/select.hpp>
-#include <freeform/trace/setup.hpp>
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
 
@@ -60,10 +42,6 @@
 #if defined(__linux__)
 #include <sched.h>
 #endif
-#endif
-#if defined(FREEFORM_WITH_EMBREE)
-#include <freeform/design/exported.hpp>
-#include <freeform/trace/embree.hpp>
 #endif
 
 namespace fs = std::filesystem;
@@ -335,7 +313,9 @@ RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
     return job;
 }
 
-json render_metrics(const RenderArgs& a, const RenderRequest& job, const RenderResult& r) {
+// `mesh`: a mesh was traced in the surface's place, of `mesh_material` when one was given.
+json render_metrics(const RenderArgs& a, bool mesh, const std::optional<MeshMaterial>& mesh_material,
+                    const RenderResult& r) {
     const Scene& scene = r.scene;
     json m;
     m["command"] = "render";
@@ -352,16 +332,16 @@ json render_metrics(const RenderArgs& a, const RenderRequest& job, const RenderR
     m["rays_per_second"] = r.seconds > 0 ? double(r.rays) / r.seconds : 0.0;
     m["mesh"] = json::array({r.surface.nx(), r.surface.ny()});
     m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
-    if (job.mesh || !scene.meshes.empty())
+    if (mesh || !scene.meshes.empty())
         m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
-    if (job.mesh)
-        m["mesh_material"] = job.mesh_material ? json{{"refractive", job.mesh_material->ior}}
-                                               : json("the scene's surface material");
+    if (mesh)
+        m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
+                                           : json("the scene's surface material");
     if (r.cells) {
         m["error"] = *r.error;
         m["error_physical"] = r.cells->error;
         m["energy_physical"] = r.cells->totals.energy();
-        m["cell_means"] = io::cell_means_json(*r.cells, job.mesh ? "the mesh, as rendered" : "the surface, as rendered");
+        m["cell_means"] = io::cell_means_json(*r.cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
     }
     if (r.start) m["start"] = io::start_report_json(*r.start);
     m["effective_scene"] = scene_to_json(scene);
@@ -382,9 +362,11 @@ int run_render(const RenderArgs& a) {
                         std::to_string(total) + " rays");
     };
     callbacks.phase = [&](const std::string& what) { status.show(what); };
-    const RenderResult r = render(job, callbacks);
+    const bool mesh = job.mesh.has_value();
+    const std::optional<MeshMaterial> mesh_material = job.mesh_material;
+    const RenderResult r = render(std::move(job), callbacks);
     status.finish();
-    const json m = render_metrics(a, job, r);
+    const json m = render_metrics(a, mesh, mesh_material, r);
     write_render_outputs(a.out, m, r.histogram, r.cells);
     std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(r.decision.tracer),
                 r.decision.reason.c_str());
@@ -672,7 +654,7 @@ int run_design(const DesignArgs& a) {
             }
             return progress(p);
         };
-        callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
+        callbacks.phase(finding_the_start(plan.scene));
         DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
                                      callbacks.progress, default_penalties(plan.scene.optimise, scene.surface.tool_radius),
                                      *replicas);

@@ -182,7 +182,7 @@ inline CompletedDesign finish_design(const Scene& scene, DesignResult result, co
 // irradiance, any resolution: io::load_target_image makes it from the scene's target
 // block).
 inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
+    if (callbacks.phase) callbacks.phase(finding_the_start(plan.scene));
     const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
     DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise, progress);
     return finish_design(plan.scene, std::move(result), target, callbacks);
@@ -198,7 +198,7 @@ inline CompletedDesign design(const Scene& scene, const ImageD& target, const De
 // The start alone (the transport surface, or whatever the scene starts from), judged and
 // finished like a design but not annealed: what `freeform design --start-only` writes.
 inline CompletedDesign design_start(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(plan.scene)) + ")");
+    if (callbacks.phase) callbacks.phase(finding_the_start(plan.scene));
     const auto t0 = std::chrono::steady_clock::now();
     DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.scene.optimise.seed,
                                           thread_count(exec::omp_t{plan.scene.optimise.threads}));

@@ -132,11 +132,9 @@ double trace_in_chunks(const Tracer& tracer, const RaySet& rays, int threads, co
 }
 
 // Traces `rays` through what `job` renders, with the receiver of `sc` (the scene, or its
-// nearest-deposit twin for the cell means). A refractive solid moves the rays' start above it.
-// Returns the seconds spent tracing.
-inline double trace_job(const RenderRequest& job, const Heightmap& surface, TracerChoice tracer, const Scene& sc,
-                      RaySet& rays, int threads, const RenderCallbacks& callbacks, Histogram& histogram,
-                      TraceTotals& totals) {
+// nearest-deposit twin for the cell means). Returns the seconds spent tracing.
+inline double trace_job(const RenderRequest& job, TracerChoice tracer, const Scene& sc, const RaySet& rays,
+                        int threads, const RenderCallbacks& callbacks, Histogram& histogram, TraceTotals& totals) {
     PathParams pp = make_path_params(sc);
     // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
     if (job.mesh && !job.mesh_normals) pp.phong_alpha = 0.0f;
@@ -145,16 +143,19 @@ inline double trace_job(const RenderRequest& job, const Heightmap& surface, Trac
     if (job.mesh_material) pp.material = MaterialView{};
     pp.interpolated_normals = job.mesh_normals;
     if (tracer == TracerChoice::heightfield)
-        return trace_in_chunks(HeightfieldTracer(surface, rays, pp), rays, threads, callbacks, histogram, totals);
+        return trace_in_chunks(HeightfieldTracer(job.surface, rays, pp), rays, threads, callbacks, histogram,
+                               totals);
 #if defined(FREEFORM_WITH_EMBREE)
     std::vector<ExtraMesh> extras;
     for (std::size_t k = 0; k < job.scene_meshes.size(); ++k)
         extras.push_back(to_surface_frame(job.scene_meshes[k], sc.surface.frame, sc.meshes[k].material));
     if (job.mesh && job.mesh_material) {
+        // A collimated beam starts above the solid, which may rise above the surface's bounds.
         ExtraMesh solid = to_surface_frame(*job.mesh, sc.surface.frame, *job.mesh_material);
-        start_above(sc.light, sc.surface.size, solid.mesh, rays);
+        RaySet lifted = rays;
+        start_above(sc.light, sc.surface.size, solid.mesh, lifted);
         extras.insert(extras.begin(), std::move(solid));
-        return trace_in_chunks(EmbreeTracer(rays, pp, std::move(extras), threads), rays, threads, callbacks,
+        return trace_in_chunks(EmbreeTracer(lifted, pp, std::move(extras), threads), lifted, threads, callbacks,
                                histogram, totals);
     }
     if (job.mesh) {
@@ -162,8 +163,9 @@ inline double trace_job(const RenderRequest& job, const Heightmap& surface, Trac
         return trace_in_chunks(EmbreeTracer(local.mesh, rays, pp, std::move(extras), threads), rays, threads,
                                callbacks, histogram, totals);
     }
-    return trace_in_chunks(EmbreeTracer(surface, rays, pp, std::move(extras), 32, EmbreeTileLayout::instanced, threads),
-                           rays, threads, callbacks, histogram, totals);
+    return trace_in_chunks(
+        EmbreeTracer(job.surface, rays, pp, std::move(extras), 32, EmbreeTileLayout::instanced, threads), rays,
+        threads, callbacks, histogram, totals);
 #else
     (void)sc, (void)rays, (void)threads, (void)callbacks, (void)histogram, (void)totals;
     throw InputError("the Embree tracer is not in this build");  // choose_tracer refuses it first
@@ -199,7 +201,7 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
     // surface (the grid only places the rays).
     if (job.surface_is_scene_start && job.target && !job.mesh && starts_from_transport(scene) &&
         scene.meshes.empty()) {
-        if (callbacks.phase) callbacks.phase(std::string("finding the start (") + to_string(requested_start(scene)) + ")");
+        if (callbacks.phase) callbacks.phase(finding_the_start(scene));
         if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, job.surface);
         DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, scene.optimise.seed, r.threads);
         r.start = st.report;
@@ -209,18 +211,17 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
     // fits (optimise.min_rays_per_mesh_cell), so a design's height map renders to its error.
     if (!job.mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, job.surface.nx(), job.surface.ny());
 
-    RaySet rays = generate_rays(scene.light, job.surface, scene.receiver, scene.optimise.seed);
+    const RaySet rays = generate_rays(scene.light, job.surface, scene.receiver, scene.optimise.seed);
     r.rays = rays.size();
-    r.seconds = render_detail::trace_job(job, job.surface, r.decision.tracer, scene, rays, r.threads, callbacks,
-                                         r.histogram, r.totals);
+    r.seconds =
+        render_detail::trace_job(job, r.decision.tracer, scene, rays, r.threads, callbacks, r.histogram, r.totals);
     if (job.target) {
         r.error = l1_error(r.histogram, make_target(*job.target, scene.receiver.width, scene.receiver.height,
                                                     target_total(rays, make_path_params(scene))));
         r.cells = converged_cell_means(
             scene, job.surface, &*job.target, physical_cell_mean_options(scene.optimise.seed),
             [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
-                RaySet own = batch;
-                render_detail::trace_job(job, job.surface, r.decision.tracer, sc, own, r.threads, callbacks, h, tt);
+                render_detail::trace_job(job, r.decision.tracer, sc, batch, r.threads, callbacks, h, tt);
             });
     }
     r.scene = std::move(job.scene);

@@ -61,6 +61,11 @@ inline StartKind requested_start(const Scene& scene) {
     return starts_from_transport(scene) ? StartKind::transport : StartKind::flat;
 }
 
+// What a long step reports while it finds the start: "finding the start (transport)".
+inline std::string finding_the_start(const Scene& scene) {
+    return std::string("finding the start (") + to_string(requested_start(scene)) + ")";
+}
+
 // The start of a design on the final mesh of `initial` (the caller's surface). For a
 // transport start, `map` keeps the transport map so that coarser meshes can be fitted
 // to it. A transport start that cannot be made, or that is no better than a flat
