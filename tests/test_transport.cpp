@@ -295,9 +295,10 @@ TEST_CASE("mesh morphing (the alternative): conserves mass and drives the densit
 #if defined(_OPENMP)
 #include <omp.h>
 
-TEST_CASE("grid OT: the same potentials whatever the number of threads Eigen's products use") {
-    // Eigen splits a matrix product's rows and columns among OpenMP threads, never a sum:
-    // the Poisson solves, and with them the whole solve, must not depend on the count.
+TEST_CASE("grid OT: the same potentials whatever the number of threads") {
+    // The Legendre passes, the pushforward and the FFT Poisson solves split rows and
+    // columns among threads, never a sum: the whole solve must not depend on the count,
+    // whether it comes from OtOptions::threads or from OpenMP's default.
     const int n = 96;
     const OtGrid g = unit_grid(n);
     Eigen::ArrayXXd src(n, n), dst = Eigen::ArrayXXd::Zero(n, n);
@@ -312,7 +313,46 @@ TEST_CASE("grid OT: the same potentials whatever the number of threads Eigen's p
     omp_set_num_threads(4);
     const OtResult four = solve_grid_ot(g, src, dst);
     omp_set_num_threads(before);
+    OtOptions three;
+    three.threads = 3;
+    const OtResult explicit_three = solve_grid_ot(g, src, dst, three);
     CHECK((one.psi == four.psi).all());
     CHECK(one.iterations == four.iterations);
+    CHECK((one.psi == explicit_three.psi).all());
+    CHECK((one.pushed == explicit_three.pushed).all());
 }
 #endif
+
+TEST_CASE("Neumann Poisson (FFT cosine transforms) solves the 5-point Laplacian it claims to") {
+    // Independent check: apply the graph Laplacian with Neumann boundaries to the solution
+    // and compare with f minus its mean (the part in the range). Sizes include a prime
+    // (kissfft's generic radix) and unequal spacings.
+    struct Size {
+        int nx, ny;
+        double hx, hy;
+    };
+    for (const Size sz : {Size{37, 24, 0.5, 0.25}, Size{60, 61, 1.0, 1.0}, Size{2, 5, 1.0, 2.0}}) {
+        const int nx = sz.nx, ny = sz.ny;
+        const double hx = sz.hx, hy = sz.hy;
+        CAPTURE(nx);
+        CAPTURE(ny);
+        Eigen::ArrayXXd f(ny, nx);
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) f(j, i) = std::sin(0.37 * i + 0.11 * j * j) + (i == nx / 2 && j == 1 ? 3.0 : 0.0);
+        const NeumannPoisson poisson(nx, ny, hx, hy, 2);
+        const Eigen::ArrayXXd u = poisson.solve(f);
+        CHECK(std::abs(u.mean()) < 1e-12);
+        const double fm = f.mean();
+        double worst = 0;
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) {
+                double lap = 0;
+                if (i > 0) lap += (u(j, i) - u(j, i - 1)) / (hx * hx);
+                if (i + 1 < nx) lap += (u(j, i) - u(j, i + 1)) / (hx * hx);
+                if (j > 0) lap += (u(j, i) - u(j - 1, i)) / (hy * hy);
+                if (j + 1 < ny) lap += (u(j, i) - u(j + 1, i)) / (hy * hy);
+                worst = std::max(worst, std::abs(lap - (f(j, i) - fm)));
+            }
+        CHECK(worst < 1e-9);
+    }
+}

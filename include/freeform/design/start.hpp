@@ -113,7 +113,9 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
         return start;
     }
     try {
-        start.map = solve_transport(scene, initial, target_image, seed);
+        TransportOptions options;
+        options.ot.threads = threads;
+        start.map = solve_transport(scene, initial, target_image, seed, options);
     } catch (const InputError& e) {
         if (scene.surface.initial_shape == InitialShape::transport) throw;
         fall_back(e.what());

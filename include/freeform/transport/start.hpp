@@ -45,7 +45,14 @@ enum class TransportMethod { back_and_forth, morphing };
 
 struct TransportOptions {
     TransportMethod method = TransportMethod::back_and_forth;
-    int max_grid = 256;            // transport grid cells along the longer side, at most
+    // The grid: `cells_per_pixel` cells per receiver pixel along each axis, at most
+    // `max_grid` along the longer side. Finer than the pixel because the start's error is
+    // set by the map at sub-pixel scale: the letter E (101² mesh, 200² px) starts at a
+    // fitted error 0.045 / 0.038 / 0.036 / 0.036 with 1 / 2 / 3 / 4 cells per pixel, the
+    // camera photograph (201² mesh) at 0.047 / 0.033 / 0.029 / 0.028 (docs/architecture.md
+    // §4b). 600² cells cost about 0.15 s per iteration on 2 cores.
+    int max_grid = 768;
+    double cells_per_pixel = 3;
     double rays_per_grid_cell = 16;  // rays sampling the source footprint, per grid cell it covers
     int fit_iterations = 4;        // map → normals → heights rounds (near field)
     OtOptions ot{};
@@ -163,6 +170,17 @@ inline Eigen::MatrixXd overlap_1d(double a0, double ha, int na, double b0, doubl
     return m;
 }
 
+// The smallest count ≥ n whose only prime factors are 2, 3 and 5: FFTs of such lengths
+// (and of twice them) take the fast radix paths.
+inline int fft_friendly(int n) {
+    for (int m = std::max(1, n);; ++m) {
+        int r = m;
+        for (const int p : {2, 3, 5})
+            while (r % p == 0) r /= p;
+        if (r == 1) return m;
+    }
+}
+
 inline void splat(Eigen::ArrayXXd& m, const OtGrid& g, double x, double y, double w) {
     const double fx = std::clamp((x - g.x0) / g.hx - 0.5, 0.0, double(g.nx - 1));
     const double fy = std::clamp((y - g.y0) / g.hy - 0.5, 0.0, double(g.ny - 1));
@@ -228,16 +246,18 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const double fp_lo_u = fp.lo_u, fp_hi_u = fp.hi_u, fp_lo_v = fp.lo_v, fp_hi_v = fp.hi_v;
     // The grid covers the receiver and the footprint (the latter limited to three times
     // the receiver's size), fine enough to resolve both the receiver's pixels and the
-    // footprint at about 100 cells along its longer side.
+    // footprint at about 100 cells along its longer side, both refined by
+    // `cells_per_pixel`; its sides are rounded up to FFT-friendly counts (the Poisson
+    // solves' transforms), the extra cells padding it evenly.
     const double limit_u = 1.5 * rec.size.x, limit_v = 1.5 * rec.size.y;
     lo_u = std::min(lo_u, std::max(fp_lo_u, -limit_u)), hi_u = std::max(hi_u, std::min(fp_hi_u, limit_u));
     lo_v = std::min(lo_v, std::max(fp_lo_v, -limit_v)), hi_v = std::max(hi_v, std::min(fp_hi_v, limit_v));
     const double fp_extent = std::max(fp_hi_u - fp_lo_u, fp_hi_v - fp_lo_v);
-    double cell = std::min({pu, pv, fp_extent > 0 ? fp_extent / 100.0 : pu});
+    double cell = std::min({pu, pv, fp_extent > 0 ? fp_extent / 100.0 : pu}) / std::max(1.0, options.cells_per_pixel);
     cell = std::max(cell, std::max(hi_u - lo_u, hi_v - lo_v) / options.max_grid);
     OtGrid g;
-    g.nx = std::max(2, int(std::ceil((hi_u - lo_u) / cell - 1e-9)));
-    g.ny = std::max(2, int(std::ceil((hi_v - lo_v) / cell - 1e-9)));
+    g.nx = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_u - lo_u) / cell - 1e-9))));
+    g.ny = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_v - lo_v) / cell - 1e-9))));
     g.hx = g.hy = cell;
     g.x0 = 0.5 * (lo_u + hi_u) - 0.5 * g.nx * cell;
     g.y0 = 0.5 * (lo_v + hi_v) - 0.5 * g.ny * cell;
@@ -324,7 +344,7 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     // vertices outside an elliptical aperture follow the map's extension and keep the
     // field smooth; they do not meet light).
     const double du = hm.du(), dv = hm.dv();
-    const NeumannPoisson poisson(nx, ny, du, dv);
+    const NeumannPoisson poisson(nx, ny, du, dv, options.ot.threads);
     Eigen::ArrayXXd h = Eigen::ArrayXXd::Zero(ny, nx);
     Eigen::ArrayXXd su = Eigen::ArrayXXd::Zero(ny, nx), sv = Eigen::ArrayXXd::Zero(ny, nx);
     const double bound_mid = 0.5 * (double(spec.h_min) + double(spec.h_max));
