@@ -240,6 +240,31 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
     CHECK(a.surface.heights() == b.surface.heights());
     CHECK(a.report.error == b.report.error);
 
+    // The scene's pixels are 3.3 mm and its footprint's cells 1 mm: the footprint sets
+    // the cell, both candidate grids are the same grid, and it is solved once.
+    CHECK(a.report.transport.other_error == -1);
+    CHECK(a.report.transport.cells_per_pixel == start_grid_cells_per_pixel[0]);
+    // With 2 mm pixels the grids differ: both are tried and the start is the one the exact
+    // tracer judged better; each grid's start rebuilt here and evaluated on its own.
+    Scene fine = s;
+    fine.receiver.size = {0.12, 0.12};
+    const DesignStart c = make_design_start(fine, testing::surface_for(fine, 31), target, 5, 2);
+    const TransportReport& t = c.report.transport;
+    REQUIRE(t.other_error >= 0);
+    CHECK(c.report.error <= t.other_error);
+    CHECK(t.cells_per_pixel != t.other_cells_per_pixel);
+    for (const double cpp : start_grid_cells_per_pixel) {
+        TransportOptions options;
+        options.cells_per_pixel = cpp;
+        const Heightmap flat = testing::surface_for(fine, 31);
+        const TransportMap map = solve_transport(fine, flat, target, 5, options);
+        TransportReport fit = map.report;
+        const Heightmap surface = surface_from_transport(fine, map, flat.nx(), flat.ny(), fit, options);
+        const double e = evaluate_surface(fine, surface, target, 5, 1).error;
+        CHECK(e == (cpp == t.cells_per_pixel ? c.report.error : t.other_error));
+        if (cpp == t.cells_per_pixel) CHECK(surface.heights() == c.surface.heights());
+    }
+
     DesignOptions o = s.optimise;
     o.seed = 5;
     o.time_budget = 0;

@@ -15,6 +15,8 @@ Variants are scene patches applied on top of each case:
   floor64  today's defaults with 64 rays per mesh cell at least (instead of 32)
   r16      today's defaults without the ray floor (16 rays per receiver cell)
   mesh-2r  r16 with a 401² mesh (photographs' former rule)
+  prev     today's defaults as an earlier checkout has them: its binary (--prev-bin) and its
+           example scenes (--prev-root), run interleaved with `new` at every point
 
 Runs are sequential (2 threads each, the machine's cores), resumable (a run whose JSON exists
 is not repeated) and write runs/<case>/<variant>-t<T>.json with the metrics that matter.
@@ -49,7 +51,10 @@ VARIANTS = {
     "r16": {"optimise": {"min_rays_per_mesh_cell": 0}},
     # ... and with the photographs' former 401² mesh.
     "mesh-2r": {"surface": {"mesh": [401, 401]}, "optimise": {"min_rays_per_mesh_cell": 0}},
+    # An earlier checkout's defaults: its binary and scenes (--prev-bin, --prev-root).
+    "prev": {},
 }
+PREV = {"bin": None, "root": None}  # set from the command line
 PHOTOS = {"camera", "gradient"}  # "auto" mesh, photographic targets on a 200² receiver
 
 # name: (scene, patch, budgets in seconds, example?)
@@ -80,10 +85,11 @@ def merge(base: dict, patch: dict) -> dict:
 
 def scene_for(case: str, variant: str) -> dict:
     path, patch, _, _ = CASES[case]
-    scene = json.loads((ROOT / path).read_text())
+    root = Path(PREV["root"]) if variant == "prev" else ROOT
+    scene = json.loads((root / path).read_text())
     target = scene.get("target", {})
     if "image" in target and not Path(target["image"]).is_absolute():
-        target["image"] = str((ROOT / path).parent / target["image"])
+        target["image"] = str((root / path).parent / target["image"])
     if "text" in patch.get("target", {}) or "image" in patch.get("target", {}):
         scene["target"] = {k: v for k, v in target.items() if k in ("font", "margin")} if "text" in patch["target"] else {}
     scene = merge(merge(scene, patch), VARIANTS[variant])
@@ -188,7 +194,12 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--plot-only", action="store_true")
+    ap.add_argument("--prev-bin", help="binary of an earlier checkout (variant prev)")
+    ap.add_argument("--prev-root", help="that checkout's root, for its example scenes (variant prev)")
     a = ap.parse_args()
+    if "prev" in a.variants.split(",") and not a.plot_only and not (a.prev_bin and a.prev_root):
+        ap.error("variant prev needs --prev-bin and --prev-root")
+    PREV["bin"], PREV["root"] = a.prev_bin, a.prev_root
     out_dir = Path(a.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not (TARGETS / "street.png").exists():
@@ -199,7 +210,8 @@ def main() -> None:
         for case in a.cases.split(","):
             for budget in CASES[case][2]:
                 for variant in a.variants.split(","):
-                    r = run_one(Path(a.bin), case, variant, budget, a.seed, out_dir)
+                    binary = Path(a.prev_bin) if variant == "prev" else Path(a.bin)
+                    r = run_one(binary, case, variant, budget, a.seed, out_dir)
                     print(f"{case:10s} {variant:4s} {budget:4g} s: error_physical {r['error_physical']:.4f} "
                           f"(fitted {r['error']:.4f}, {r['wall_seconds']:.0f} s wall)", flush=True)
         print(f"study wall time {time.monotonic() - t0:.0f} s")

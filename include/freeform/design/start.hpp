@@ -90,6 +90,56 @@ struct SharedStart {
     int skip = 0;            // coarse planned levels skipped
 };
 
+// The transport grids a design's start tries, in cells per receiver pixel. Each start is
+// judged by the exact tracer and the better one kept (docs/architecture.md §4b): three
+// cells per pixel resolve the map at the sub-pixel positions where a letter's edges and a
+// photograph's detail lie (the E and the camera start far lower); one per pixel may be
+// better where the mesh is coarse for the fine grid, its vertices sampling a map finer
+// than their spacing. Where the footprint, not the pixels, sets the cell (the headlight's
+// 4 mm pixels), both give the same grid and it is solved once.
+inline constexpr std::array<double, 2> start_grid_cells_per_pixel{3.0, 1.0};
+
+struct TransportStart {
+    TransportMap map;  // report: the grid used, and the other grid's start error
+    Heightmap surface;
+    SurfaceEvaluation eval;
+};
+
+// The transport start of `initial`'s mesh on each grid of start_grid_cells_per_pixel (a
+// grid that max_grid makes equal to the one before is not solved twice), the better one
+// under the exact tracer, with the same rays for both: the choice depends on the scene
+// alone. An InputError on the first grid (no light reaches the receiver) propagates.
+inline TransportStart best_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
+                                           std::uint64_t seed, int threads) {
+    std::optional<TransportStart> best;
+    const FlatFootprint fp = flat_footprint(scene, initial);
+    OtGrid tried{};
+    for (const double cells_per_pixel : start_grid_cells_per_pixel) {
+        TransportOptions options;
+        options.ot.threads = threads;
+        options.cells_per_pixel = cells_per_pixel;
+        const OtGrid g = transport_grid(scene, fp, options);
+        if (g.nx == tried.nx && g.ny == tried.ny) continue;
+        tried = g;
+        TransportMap map = solve_transport(scene, initial, target_image, seed, options);
+        TransportReport fitted = map.report;
+        Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
+        map.report = fitted;
+        const SurfaceEvaluation eval = evaluate_surface(scene, surface, target_image, seed, threads);
+        if (!best) {
+            best = TransportStart{std::move(map), std::move(surface), eval};
+        } else if (eval.error < best->eval.error) {
+            map.report.other_cells_per_pixel = best->map.report.cells_per_pixel;
+            map.report.other_error = best->eval.error;
+            best = TransportStart{std::move(map), std::move(surface), eval};
+        } else {
+            best->map.report.other_cells_per_pixel = cells_per_pixel;
+            best->map.report.other_error = eval.error;
+        }
+    }
+    return std::move(*best);
+}
+
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      std::uint64_t seed, int threads) {
     using clock = std::chrono::steady_clock;
@@ -112,19 +162,19 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
         start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
         return start;
     }
+    std::optional<TransportStart> best;
     try {
-        TransportOptions options;
-        options.ot.threads = threads;
-        start.map = solve_transport(scene, initial, target_image, seed, options);
+        best = best_transport_start(scene, initial, target_image, seed, threads);
     } catch (const InputError& e) {
         if (scene.surface.initial_shape == InitialShape::transport) throw;
         fall_back(e.what());
         start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
         return start;
     }
+    start.map = std::move(best->map);
+    start.surface = std::move(best->surface);
+    const SurfaceEvaluation mine = best->eval;
     start.report.transport = start.map->report;
-    start.surface = surface_from_transport(scene, *start.map, initial.nx(), initial.ny(), start.report.transport);
-    const SurfaceEvaluation mine = evaluate_surface(scene, start.surface, target_image, seed, threads);
     const SurfaceEvaluation flat = evaluate_surface(scene, initial, target_image, seed, threads);
     start.report.error = mine.error;
     start.report.energy = mine.energy;

@@ -68,7 +68,10 @@ inline nlohmann::json start_report_json(const StartReport& s) {
                           {"height_range", t.height_range},
                           {"height_excess", t.height_excess},
                           {"fits_height_bounds", t.height_excess <= 0},
-                          {"unmapped_fraction", t.unmapped_fraction}};
+                          {"unmapped_fraction", t.unmapped_fraction},
+                          {"cells_per_pixel", t.cells_per_pixel}};
+        if (t.other_error >= 0)
+            j["transport"]["other_grid"] = {{"cells_per_pixel", t.other_cells_per_pixel}, {"error", t.other_error}};
     }
     return j;
 }

@@ -45,8 +45,8 @@ enum class TransportMethod { back_and_forth, morphing };
 
 struct TransportOptions {
     TransportMethod method = TransportMethod::back_and_forth;
-    // The grid: `cells_per_pixel` cells per receiver pixel along each axis, at most
-    // `max_grid` along the longer side. Finer than the pixel because the start's error is
+    // The grid (transport_grid): `cells_per_pixel` cells per receiver pixel along each
+    // axis, at most `max_grid` along the longer side. Finer than the pixel because the start's error is
     // set by the map at sub-pixel scale: the letter E (101² mesh, 200² px) starts at a
     // fitted error 0.045 / 0.038 / 0.036 / 0.036 with 1 / 2 / 3 / 4 cells per pixel, the
     // camera photograph (201² mesh) at 0.047 / 0.033 / 0.029 / 0.028 (docs/architecture.md
@@ -71,6 +71,10 @@ struct TransportReport {
     double height_range = 0;      // max − min of the fitted heights (metres, active cells)
     double height_excess = 0;     // by how much the range exceeded height_bounds (0: it fits)
     double unmapped_fraction = 0; // vertices whose flat landing missed the receiver plane
+    double cells_per_pixel = 0;   // TransportOptions::cells_per_pixel of the map used
+    // The designer tries two grids and keeps the better start (design/start.hpp): the other
+    // one's cells per pixel and its start's error under the exact tracer (−1: none tried).
+    double other_cells_per_pixel = 0, other_error = -1;
 };
 
 // The transport map of a scene, reusable for several meshes.
@@ -229,6 +233,34 @@ inline FlatFootprint flat_footprint(const Scene& scene, const Heightmap& surface
     return fp;
 }
 
+// The transport grid of a scene whose flat surface lands the light on `fp`: it covers the
+// receiver and the footprint (the latter limited to three times the receiver's size),
+// fine enough to resolve the receiver's pixels by `cells_per_pixel` cells and the
+// footprint by about 100 cells along its longer side, with at most `max_grid` cells a
+// side; the sides are rounded up to FFT-friendly counts (the Poisson solves'
+// transforms), the extra cells padding it evenly. Only the pixels are refined: where the
+// footprint sets the cell (a 50² receiver of 4 mm pixels, a footprint of 1 mm cells), a
+// finer grid gave worse starts (the headlight: 0.015 / 0.021 / 0.024 at 1 / 2 / 3 times).
+inline OtGrid transport_grid(const Scene& scene, const FlatFootprint& fp, const TransportOptions& options) {
+    const Receiver& rec = scene.receiver;
+    const double pu = rec.size.x / rec.width, pv = rec.size.y / rec.height;
+    double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
+    const double limit_u = 1.5 * rec.size.x, limit_v = 1.5 * rec.size.y;
+    lo_u = std::min(lo_u, std::max(fp.lo_u, -limit_u)), hi_u = std::max(hi_u, std::min(fp.hi_u, limit_u));
+    lo_v = std::min(lo_v, std::max(fp.lo_v, -limit_v)), hi_v = std::max(hi_v, std::min(fp.hi_v, limit_v));
+    const double fp_extent = std::max(fp.hi_u - fp.lo_u, fp.hi_v - fp.lo_v);
+    const double refine = std::max(1.0, options.cells_per_pixel);
+    double cell = std::min({pu / refine, pv / refine, fp_extent > 0 ? fp_extent / 100.0 : pu});
+    cell = std::max(cell, std::max(hi_u - lo_u, hi_v - lo_v) / options.max_grid);
+    OtGrid g;
+    g.nx = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_u - lo_u) / cell - 1e-9))));
+    g.ny = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_v - lo_v) / cell - 1e-9))));
+    g.hx = g.hy = cell;
+    g.x0 = 0.5 * (lo_u + hi_u) - 0.5 * g.nx * cell;
+    g.y0 = 0.5 * (lo_v + hi_v) - 0.5 * g.ny * cell;
+    return g;
+}
+
 // Solves the transport from the light's flat-surface footprint to the target image
 // (relative irradiance, any resolution). `surface` gives the aperture (its mask).
 inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
@@ -239,28 +271,10 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
         throw InputError("target: the image is entirely black: there is nothing to send light to");
     const transport_detail::Optics optics(scene);
     const Receiver& rec = scene.receiver;
-    const double pu = rec.size.x / rec.width, pv = rec.size.y / rec.height;
-
-    double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
     const FlatFootprint fp = flat_footprint(scene, surface);
     const double fp_lo_u = fp.lo_u, fp_hi_u = fp.hi_u, fp_lo_v = fp.lo_v, fp_hi_v = fp.hi_v;
-    // The grid covers the receiver and the footprint (the latter limited to three times
-    // the receiver's size), fine enough to resolve both the receiver's pixels and the
-    // footprint at about 100 cells along its longer side, both refined by
-    // `cells_per_pixel`; its sides are rounded up to FFT-friendly counts (the Poisson
-    // solves' transforms), the extra cells padding it evenly.
-    const double limit_u = 1.5 * rec.size.x, limit_v = 1.5 * rec.size.y;
-    lo_u = std::min(lo_u, std::max(fp_lo_u, -limit_u)), hi_u = std::max(hi_u, std::min(fp_hi_u, limit_u));
-    lo_v = std::min(lo_v, std::max(fp_lo_v, -limit_v)), hi_v = std::max(hi_v, std::min(fp_hi_v, limit_v));
-    const double fp_extent = std::max(fp_hi_u - fp_lo_u, fp_hi_v - fp_lo_v);
-    double cell = std::min({pu, pv, fp_extent > 0 ? fp_extent / 100.0 : pu}) / std::max(1.0, options.cells_per_pixel);
-    cell = std::max(cell, std::max(hi_u - lo_u, hi_v - lo_v) / options.max_grid);
-    OtGrid g;
-    g.nx = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_u - lo_u) / cell - 1e-9))));
-    g.ny = transport_detail::fft_friendly(std::max(2, int(std::ceil((hi_v - lo_v) / cell - 1e-9))));
-    g.hx = g.hy = cell;
-    g.x0 = 0.5 * (lo_u + hi_u) - 0.5 * g.nx * cell;
-    g.y0 = 0.5 * (lo_v + hi_v) - 0.5 * g.ny * cell;
+    const OtGrid g = transport_grid(scene, fp, options);
+    const double cell = g.hx;
 
     // ν: the target, area-averaged onto the grid (image row 0 is the top, largest v).
     const ImageD flipped = target_image.colwise().reverse();
@@ -293,6 +307,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
 
     TransportMap m;
     m.ot = options.method == TransportMethod::morphing ? solve_morphing(g, mu, nu) : solve_grid_ot(g, mu, nu, options.ot);
+    m.report.cells_per_pixel = options.cells_per_pixel;
     m.report.grid_x = g.nx;
     m.report.grid_y = g.ny;
     m.report.cell_size = cell;
