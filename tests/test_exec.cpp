@@ -95,6 +95,26 @@ TEST_CASE("for_each_chunk splits [0, n) into contiguous ranges fixed by n and ch
     }
 }
 
+TEST_CASE("for_each_worker_range gives each thread one contiguous range, never more ranges than items") {
+    for (const int threads : {1, 2, 3}) {
+        for (const std::int64_t n : {std::int64_t(0), std::int64_t(2), std::int64_t(1001)}) {
+            std::vector<int> seen(static_cast<std::size_t>(n), 0);
+            int calls = 0;
+            for_each_worker_range(exec::omp_t{threads}, n, [&](std::int64_t b, std::int64_t e) {
+#if defined(_OPENMP)
+#pragma omp atomic
+#endif
+                ++calls;
+                for (std::int64_t i = b; i < e; ++i) seen[std::size_t(i)] += 1;
+            });
+            // A team of `threads` (1 without OpenMP), never more ranges than items, at least one call.
+            const std::int64_t expected = std::max<std::int64_t>(1, std::min<std::int64_t>(thread_count(exec::omp_t{threads}), n));
+            CHECK(calls == expected);
+            CHECK(std::all_of(seen.begin(), seen.end(), [](int v) { return v == 1; }));
+        }
+    }
+}
+
 TEST_CASE("the GPU tracer's record kernel gives HeightfieldTracer's records under exec::seq and exec::omp") {
     const WavyScene w = wavy_scene(Deposit::bilinear);
     const PathParams pp = make_path_params(w.scene);

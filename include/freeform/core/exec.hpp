@@ -2,6 +2,7 @@
 // Execution policies and the one parallel loop the library uses. Kernels are written
 // once as callables taking an index; the policy decides where they run. The CUDA policy
 // lives in freeform/cuda/exec_cuda.cuh and adds an overload for exec::cuda_t.
+#include <algorithm>
 #include <concepts>
 #include <cstdint>
 
@@ -63,6 +64,16 @@ void for_each_chunk(P p, std::int64_t n, int chunks, F&& f) {
         const std::int64_t end = n * (c + 1) / chunks;
         f(static_cast<int>(c), begin, end);
     });
+}
+
+// Splits [0, n) into one contiguous range per thread of `p` (fewer when n is smaller) and
+// calls f(begin, end) for each: for loops over independent items whose workers keep
+// scratch of their own (buffers, an FFT plan). The ranges depend on the thread count, so
+// an item's result must not depend on which range it is in (no sums across items).
+template <class P, class F>
+void for_each_worker_range(P p, std::int64_t n, F&& f) {
+    const std::int64_t workers = std::max<std::int64_t>(1, std::min<std::int64_t>(thread_count(p), n));
+    for_each_chunk(p, n, int(workers), [&](int, std::int64_t begin, std::int64_t end) { f(begin, end); });
 }
 
 }  // namespace freeform

@@ -119,7 +119,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
         options.ot.threads = threads;
         options.cells_per_pixel = cells_per_pixel;
         const OtGrid g = transport_grid(scene, fp, options);
-        if (g.nx == tried.nx && g.ny == tried.ny) continue;
+        if (g.nx == tried.nx && g.ny == tried.ny && g.hx == tried.hx) continue;
         tried = g;
         TransportMap map = solve_transport(scene, initial, target_image, seed, options);
         TransportReport fitted = map.report;

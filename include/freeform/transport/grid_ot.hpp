@@ -169,8 +169,7 @@ private:
     // DCT-II (inverse = false) or its inverse, the DCT-III.
     void along(Eigen::ArrayXXd& a, const Axis& ax, bool inverse, bool columns) const {
         const int n = ax.n, lines = columns ? int(a.cols()) : int(a.rows());
-        const int workers = std::max(1, std::min(thread_count(exec::omp_t{threads_}), lines));
-        for_each_chunk(exec::omp_t{threads_}, lines, workers, [&](int, std::int64_t begin, std::int64_t end) {
+        for_each_worker_range(exec::omp_t{threads_}, lines, [&](std::int64_t begin, std::int64_t end) {
             Eigen::FFT<double> fft;
             std::vector<std::complex<double>> in(std::size_t(2 * n)), out(std::size_t(2 * n));
             for (std::int64_t l = begin; l < end; ++l) {
@@ -383,8 +382,7 @@ private:
     // range of lines per worker.
     template <class F>
     void lines(int n, F&& f) const {
-        const int workers = std::max(1, std::min(thread_count(exec::omp_t{threads_}), n));
-        for_each_chunk(exec::omp_t{threads_}, n, workers, [&](int, std::int64_t begin, std::int64_t end) {
+        for_each_worker_range(exec::omp_t{threads_}, n, [&](std::int64_t begin, std::int64_t end) {
             LineScratch scratch;
             for (std::int64_t l = begin; l < end; ++l) f(l, scratch);
         });
