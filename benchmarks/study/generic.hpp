@@ -120,10 +120,15 @@ inline json run_pagmo(const std::string& which, ControlObjective& f, std::uint64
             const double sigma0 = std::clamp(s, 1e-9, 1.0);
             settings = {{"lambda", lambda}, {"sigma0", sigma0}, {"initial_sd", 2 * s}, {"ftol", 0}, {"xtol", 0}};
             const unsigned gens = 1000000u;
-            const pagmo::algorithm algo =
+            // Debian's libpagmo is built for plain x86-64, where Eigen takes memory from malloc;
+            // this program is built with -march=x86-64-v3 (AVX), where Eigen frees its blocks as
+            // 32-byte aligned ones. CMA-ES and xNES keep Eigen state that libpagmo allocates and
+            // whose destructor is compiled here: destroying the algorithm crashes (free() of a
+            // bad pointer). So it is never destroyed: a few kB per run, returned at exit.
+            const pagmo::algorithm& algo = *new pagmo::algorithm{
                 which == "pagmo-cmaes"
                     ? pagmo::algorithm{pagmo::cmaes(gens, -1, -1, -1, -1, sigma0, 1e-300, 1e-300, false, false, pseed)}
-                    : pagmo::algorithm{pagmo::xnes(gens, -1, -1, -1, sigma0, 1e-300, 1e-300, false, false, pseed)};
+                    : pagmo::algorithm{pagmo::xnes(gens, -1, -1, -1, sigma0, 1e-300, 1e-300, false, false, pseed)}};
             while (!f.exhausted()) {
                 pop = algo.evolve(pop);
                 ++generations_or_passes;

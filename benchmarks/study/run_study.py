@@ -2,9 +2,9 @@
 """The speed/accuracy study of freeform: runs study_run over cases x methods x seeds,
 then aggregates, plots and writes REPORT.md (see benchmarks/study/README.md).
 
-  run_study.py --quick          ~7 minutes: E and headlight, 5 methods and a few variants of ours,
-                                3 seeds, short budgets -> benchmarks/results/quick/
-  run_study.py                  the full study (about 4.7 hours on 2 cores) -> benchmarks/results/
+  run_study.py --quick          a few minutes: E and headlight, ours and the baselines, 2 seeds,
+                                short budgets -> benchmarks/results/quick/
+  run_study.py                  the full study (about 1.6 hours on 2 cores) -> benchmarks/results/
   run_study.py --report-only    re-aggregate the runs already on disk
 
 Runs are sequential (each with --threads, recorded) and resumable: a run whose result file
@@ -31,12 +31,12 @@ sys.path.insert(0, str(HERE))
 
 import study_plan as plan  # noqa: E402
 
-# Seconds per run on top of its budget (start-up, target rendering, the final renders),
-# measured on the 2-core development machine; the camera case renders a 401² surface, and
-# under grazing light our designer overshoots its budget (its per-stage calibration is not
-# counted against it, and moves are slow there).
-OVERHEAD = {"camera": 4.0, "grazing": 10.0, "point-low": 4.0}
-DEFAULT_OVERHEAD = 2.5
+# Seconds per run on top of its budget (start-up, target rendering, the final renders and
+# error_physical), measured on the 2-core development machine; the camera case renders a
+# 401² surface, and under grazing light our designer overshoots its budget (its per-stage
+# calibration is not counted against it, and moves are slow there).
+OVERHEAD = {"camera": 10.0, "grazing": 14.0, "headlight": 3.0}
+DEFAULT_OVERHEAD = 8.0
 
 
 def machine_info(threads: int) -> dict:
@@ -86,10 +86,6 @@ def run_command(binary: Path, run: plan.Run, threads: int, out_file: Path, image
     if patch:
         cmd += ["--patch", json.dumps(patch, separators=(",", ":"))]
     cmd += list(method.options)
-    if method.judged_with_check:
-        cmd += ["--check-render"]
-    if method.name in ("ours", "ours-flat-start") and run.purpose in ("main", "quick"):
-        cmd += ["--compare-tracers"]
     if image_prefix is not None:
         cmd += ["--save-images", str(image_prefix)]
     return cmd
@@ -116,6 +112,23 @@ def estimate(runs: list[plan.Run]) -> float:
     return sum(plan.expected_seconds(r) + OVERHEAD.get(r.case, DEFAULT_OVERHEAD) for r in runs)
 
 
+def median_iterations(out_dir: Path, case: str) -> int | None:
+    """The median iterations of ours' runs at the case's budget on disk (purpose main)."""
+    its = []
+    for f in sorted((out_dir / "runs" / case / "ours").glob("*.json")):
+        try:
+            res = json.loads(f.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        if res.get("study", {}).get("purpose") == "main" and "iterations" in res:
+            its.append(int(res["iterations"]))
+    if not its:
+        return None
+    its.sort()
+    mid = len(its) // 2
+    return its[mid] if len(its) % 2 else (its[mid - 1] + its[mid]) // 2
+
+
 def fmt_duration(s: float) -> str:
     s = int(round(s))
     return f"{s // 3600}h{(s % 3600) // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
@@ -129,31 +142,27 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="threads per run (default: all cores)")
     ap.add_argument("--cases", help="comma-separated subset of cases")
     ap.add_argument("--methods", help="comma-separated subset of methods")
-    ap.add_argument("--purposes", help="comma-separated subset of purposes (main, ablation, extra, stress, ladder, "
-                    "model, evaluation, goals; quick mode: quick, evaluation; outside the full plan, run only when "
-                    "named: stability-fixed, mesh-rule)")
+    ap.add_argument("--purposes", help="comma-separated subset of purposes (main, ladder, stability, stress; "
+                    "quick mode: quick)")
     ap.add_argument("--seeds", type=int, help="at most this many seeds per group (a cheaper, less certain study)")
     ap.add_argument("--fresh", action="store_true", help="repeat runs whose results exist")
     ap.add_argument("--report-only", action="store_true", help="only aggregate the runs on disk")
     ap.add_argument("--dry-run", action="store_true", help="print the plan and its estimated duration")
-    ap.add_argument("--fixed-iterations", help="CASE=N,... iteration caps of the stability-fixed methods instead "
-                    "of study_plan.FIXED_ITERATIONS (e.g. re-derived from newer time-budget runs)")
+    ap.add_argument("--fixed-iterations", help="CASE=N,... iteration caps of the stability methods (default: the "
+                    "median iterations of ours' main runs of the case on disk)")
     args = ap.parse_args()
 
     for item in (args.fixed_iterations or "").split(","):
         if item:
             case, _, n = item.partition("=")
-            if case not in plan.FIXED_ITERATIONS or not n.isdigit():
-                ap.error(f"--fixed-iterations: expected CASE=N with CASE one of {sorted(plan.FIXED_ITERATIONS)}, got {item!r}")
+            if case not in plan.CASES or not n.isdigit():
+                ap.error(f"--fixed-iterations: expected CASE=N with CASE one of {sorted(plan.CASES)}, got {item!r}")
             plan.FIXED_ITERATIONS[case] = int(n)  # the methods hold this dict: they see the change
 
     mode = "quick" if args.quick else "full"
     out_dir = args.out or (ROOT / "benchmarks/results" / ("quick" if args.quick else ""))
     out_dir = out_dir.resolve()
     runs = plan.quick_plan() if args.quick else plan.full_plan()
-    if args.purposes and not args.quick:
-        # Purposes outside the full plan (issue 11's stability-fixed and mesh-rule): only when named.
-        runs += plan.separate_plan(set(args.purposes.split(",")) & set(plan.SEPARATE_PURPOSES))
     if args.cases:
         keep = set(args.cases.split(","))
         runs = [r for r in runs if r.case in keep]
@@ -215,10 +224,18 @@ def main() -> int:
             method = plan.METHODS[r.method]
             out_file = out_dir / "runs" / (r.key + ".json")
             image_prefix = out_dir / "images" / f"{r.case}-{r.method}" if r.save_images else None
-            cmd = run_command(binary, r, args.threads, out_file, image_prefix)
-            cfg = config_of(cmd)
             if method.engine in unavailable:
                 continue
+            if r.method in plan.ITERATION_METHODS and r.case not in plan.FIXED_ITERATIONS:
+                n = median_iterations(out_dir, r.case)
+                if n is None:
+                    failed.append({"run": r.key, "why": "no main runs of ours to take the iteration count from"})
+                    print(f"  {r.key}: no main runs of ours on disk, skipped", flush=True)
+                    continue
+                plan.FIXED_ITERATIONS[r.case] = n
+                print(f"  {r.case}: fixed iteration count {n} (median of ours' main runs)", flush=True)
+            cmd = run_command(binary, r, args.threads, out_file, image_prefix)
+            cfg = config_of(cmd)
             if out_file.exists() and not args.fresh:
                 try:
                     old = json.loads(out_file.read_text())
@@ -262,14 +279,6 @@ def main() -> int:
     if not meta_file.exists():
         print(f"run_study.py: no study in {out_dir} (run it first)", file=sys.stderr)
         return 1
-    if runs and all(r.purpose in plan.SEPARATE_PURPOSES for r in runs):
-        # Issue 11's own plans: their tables, not the full study's report.
-        import issue11_tables
-        purposes = {r.purpose for r in runs}
-        if len(purposes) == 1:
-            kind = "fixed" if "stability-fixed" in purposes else "mesh"
-            print(f"report: {issue11_tables.write_report(kind, out_dir)}")
-        return 0
     import study_report  # matplotlib is needed only from here on
 
     report = study_report.build(out_dir, json.loads(meta_file.read_text()), quick=(mode == "quick"))
