@@ -119,6 +119,12 @@ int run(const Args& a) {
         else
             run_scene.light.rays_per_cell *= a.rays_scale;
     }
+    if (a.engine == "design") {
+        // What `freeform design` does (plan_design, design/pipeline.hpp): the final level gets
+        // at least optimise.min_rays_per_mesh_cell rays per mesh cell, so that a design cannot
+        // fit its rays' noise. The baselines keep the case's rays (a full trace per evaluation).
+        run_scene.light.rays_per_cell = fitting_rays_per_cell(run_scene, nx, ny);
+    }
     const auto [case_nx, case_ny] = final_mesh_of(judge);
 
     json out;
