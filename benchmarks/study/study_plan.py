@@ -101,7 +101,7 @@ CASES = {c.name: c for c in [
     Case("lens", "examples/scenes/lens.json", 10,
          title="letter L through a PMMA lens (IOR 1.49, 1.5 cm thick, ±12 mm bounds, 101², 200² px)"),
     Case("camera", "examples/scenes/camera.json", 30,
-         title="grey photograph 'camera' (collimated mirror, auto 401², 200² px)",
+         title="grey photograph 'camera' (collimated mirror, auto 201², 200² px)",
          reference={"error": 0.104, "energy": 0.948, "iterations": 5.6e6, "seconds": 4980,
                     "note": "the reference's photograph is Lenna, not this image"}),
     Case("lens-5mm", "examples/scenes/lens.json", 10, case_patch=LENS_5MM_PATCH,
