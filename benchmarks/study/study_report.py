@@ -170,32 +170,48 @@ class Study:
             ax.axis("off")
         return fig, list(axes.flat[:n])
 
+    def _plot_ladder(self, ax, case, label):
+        ladder = self.ours_ladder(case)
+        if ladder:
+            t = [med([r["seconds"] for r in rs]) for _, rs in ladder]
+            m = [med([r["phys"] for r in rs]) for _, rs in ladder]
+            lo = [min(r["phys"] for r in rs) for _, rs in ladder]
+            hi = [max(r["phys"] for r in rs) for _, rs in ladder]
+            ax.errorbar(t, m, yerr=[np.subtract(m, lo), np.subtract(hi, m)], color=COLORS["ours"], marker="o",
+                        ms=4, lw=1.6, capsize=3, label=label)
+
+    def _plot_method(self, ax, case, method, label):
+        rs = self.main(case, method)
+        if not rs:
+            return
+        if method == "transport-only":  # at the start's own time
+            t = med([r["start"].get("seconds") or r["seconds"] for r in rs])
+        else:
+            t = med([r["seconds"] for r in rs])
+        e = [r["phys"] for r in rs]
+        mm = med(e)
+        ax.errorbar([t], [mm], yerr=[[mm - min(e)], [max(e) - mm]], color=COLORS.get(method, "#888"),
+                    marker="D" if method == "transport-only" else "s", ms=5, capsize=3, ls="none", label=label)
+
+    @staticmethod
+    def _legend(fig, axes, **kw):
+        handles, labels = [], []
+        for ax in axes:
+            for h, lab in zip(*ax.get_legend_handles_labels()):
+                if lab not in labels:
+                    handles.append(h)
+                    labels.append(lab)
+        fig.legend(handles, labels, loc="lower right", fontsize=8, **kw)
+
     def fig_overview(self) -> str | None:
         if not self.public:
             return None
         fig, axes = self._panels(self.public)
         for ax, case in zip(axes, self.public):
-            ladder = self.ours_ladder(case)
-            if ladder:
-                t = [med([r["seconds"] for r in rs]) for _, rs in ladder]
-                m = [med([r["phys"] for r in rs]) for _, rs in ladder]
-                lo = [min(r["phys"] for r in rs) for _, rs in ladder]
-                hi = [max(r["phys"] for r in rs) for _, rs in ladder]
-                ax.errorbar(t, m, yerr=[np.subtract(m, lo), np.subtract(hi, m)], color=COLORS["ours"], marker="o",
-                            ms=4, lw=1.6, capsize=3, label="ours")
+            self._plot_ladder(ax, case, "ours")
             for method in self.methods(case):
-                if method == "ours":
-                    continue
-                rs = self.main(case, method)
-                if method == "transport-only":
-                    t = med([r["start"].get("seconds") or r["seconds"] for r in rs])
-                else:
-                    t = med([r["seconds"] for r in rs])
-                e = [r["phys"] for r in rs]
-                mm = med(e)
-                ax.errorbar([t], [mm], yerr=[[mm - min(e)], [max(e) - mm]], color=COLORS.get(method, "#888"),
-                            marker="D" if method == "transport-only" else "s", ms=5, capsize=3, ls="none",
-                            label=method)
+                if method != "ours":
+                    self._plot_method(ax, case, method, method)
             ax.set_xscale("log")
             ax.set_yscale("log")
             for axis in (ax.xaxis, ax.yaxis):
@@ -206,13 +222,7 @@ class Study:
             ax.set_ylabel("error_physical", fontsize=8)
             ax.grid(True, which="both", alpha=0.3)
             ax.tick_params(labelsize=7)
-        handles, labels = [], []
-        for ax in axes:
-            for h, lab in zip(*ax.get_legend_handles_labels()):
-                if lab not in labels:
-                    handles.append(h)
-                    labels.append(lab)
-        fig.legend(handles, labels, loc="lower right", fontsize=8, ncol=2 if len(self.public) % 4 == 0 else 1)
+        self._legend(fig, axes, ncol=2 if len(self.public) % 4 == 0 else 1)
         fig.suptitle("error_physical against time: median and min–max over seeds (ours at B/2, B, 2B; "
                      "baselines at B; the transport start at its own time)", fontsize=10)
         fig.tight_layout()
@@ -225,20 +235,8 @@ class Study:
             return None
         fig, axes = self._panels(self.public)
         for ax, case in zip(axes, self.public):
-            ladder = self.ours_ladder(case)
-            if ladder:
-                t = [med([r["seconds"] for r in rs]) for _, rs in ladder]
-                m = [med([r["phys"] for r in rs]) for _, rs in ladder]
-                lo = [min(r["phys"] for r in rs) for _, rs in ladder]
-                hi = [max(r["phys"] for r in rs) for _, rs in ladder]
-                ax.errorbar(t, m, yerr=[np.subtract(m, lo), np.subtract(hi, m)], color=COLORS["ours"], marker="o",
-                            ms=4, lw=1.6, capsize=3, label="ours (B/2, B, 2B)")
-            rs = self.main(case, "transport-only")
-            if rs:
-                e = [r["phys"] for r in rs]
-                t0 = med([r["start"].get("seconds") or r["seconds"] for r in rs])
-                ax.errorbar([t0], [med(e)], yerr=[[med(e) - min(e)], [max(e) - med(e)]], color=COLORS["transport-only"],
-                            marker="D", ms=5, capsize=3, ls="none", label="transport start alone")
+            self._plot_ladder(ax, case, "ours (B/2, B, 2B)")
+            self._plot_method(ax, case, "transport-only", "transport start alone")
             for gcase, seconds, goal in GOALS:
                 if gcase == case:
                     ax.plot([seconds], [goal], marker="_", ms=18, mew=2, color="#d62728", ls="none",
@@ -248,13 +246,7 @@ class Study:
             ax.set_ylabel("error_physical", fontsize=8)
             ax.grid(True, alpha=0.3)
             ax.tick_params(labelsize=7)
-        handles, labels = [], []
-        for ax in axes:
-            for h, lab in zip(*ax.get_legend_handles_labels()):
-                if lab not in labels:
-                    handles.append(h)
-                    labels.append(lab)
-        fig.legend(handles, labels, loc="lower right", fontsize=8)
+        self._legend(fig, axes)
         fig.suptitle("Ours against time (linear axis): median and min–max over seeds", fontsize=10)
         fig.tight_layout()
         return self.save(fig, "ours_time")
@@ -291,13 +283,7 @@ class Study:
             ax.set_ylabel("optimiser's own error", fontsize=8)
             ax.grid(True, which="both", alpha=0.3)
             ax.tick_params(labelsize=7)
-        handles, labels = [], []
-        for ax in axes:
-            for h, lab in zip(*ax.get_legend_handles_labels()):
-                if lab not in labels:
-                    handles.append(h)
-                    labels.append(lab)
-        fig.legend(handles, labels, loc="lower right", fontsize=8)
+        self._legend(fig, axes)
         fig.suptitle("What each optimiser saw: its own error (fitted rays, bilinear deposit; final level only) at the "
                      "case's budget B, median over seeds; ★ = error_physical at the end", fontsize=10)
         fig.tight_layout()
@@ -471,6 +457,8 @@ class Study:
                                  f"{1000 * exc:.1f} mm over the bounds")
                 used = sum((r["start"].get("used") == "transport") for r in ours)
                 facts.append(f"transport start used in {used}/{len(ours)} runs")
+                facts.append(f"ours took {med([r['seconds'] for r in ours]):.1f} s of its {self.budget(case):g} s "
+                             f"budget, the start alone {med([r['start'].get('seconds') for r in ours]):.1f} s")
                 facts.append(f"ours' moves/s {fnum(med([r['eps'] for r in ours]))} "
                              f"(E at B: {fnum(med([r['eps'] for r in self.main('E', 'ours')]))})")
             notes.append(f"- **{case}** — {c.stress}. Measured: " + ("; ".join(facts) if facts else "–") + ".")
