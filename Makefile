@@ -9,7 +9,7 @@
 #                       then each reader's fuzz target for FUZZ_TIME seconds; findings in
 #                       build/fuzz/artifacts/<reader>/, non-zero exit if any (docs/fuzzing.md)
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
-#                         (benchmarks/results/REPORT.md; the full study takes about 1 h 45 min on
+#                         (benchmarks/results/REPORT.md; the full study takes about 1 h 50 min on
 #                         2 cores and reuses the runs in benchmarks/results/runs, the committed ones
 #                         included; STUDY_ARGS=--fresh measures every run again)
 #   make validate       independent check with POV-Ray 3.7 photon mapping: designs E, F, L, the

@@ -4,7 +4,7 @@ then aggregates, plots and writes REPORT.md (see benchmarks/study/README.md).
 
   run_study.py --quick          a few minutes: E and headlight, ours and the baselines, 2 seeds,
                                 short budgets -> benchmarks/results/quick/
-  run_study.py                  the full study (about 1.6 hours on 2 cores) -> benchmarks/results/
+  run_study.py                  the full study (about 1 h 50 min on 2 cores) -> benchmarks/results/
   run_study.py --report-only    re-aggregate the runs already on disk
 
 Runs are sequential (each with --threads, recorded) and resumable: a run whose result file
@@ -19,6 +19,7 @@ import json
 import os
 import platform
 import shlex
+import statistics
 import subprocess
 import sys
 import time
@@ -32,8 +33,8 @@ sys.path.insert(0, str(HERE))
 import study_plan as plan  # noqa: E402
 
 # Seconds per run on top of its budget (start-up, target rendering, the final renders and
-# error_physical), measured on the 2-core development machine; the camera case renders a
-# 401² surface, and under grazing light our designer overshoots its budget (its per-stage
+# error_physical), measured on the 2-core development machine; the camera case traces 512
+# rays per cell for error_physical, and under grazing light our designer overshoots its budget (its per-stage
 # calibration is not counted against it, and moves are slow there).
 OVERHEAD = {"camera": 10.0, "grazing": 14.0, "headlight": 3.0}
 DEFAULT_OVERHEAD = 8.0
@@ -122,11 +123,7 @@ def median_iterations(out_dir: Path, case: str) -> int | None:
             continue
         if res.get("study", {}).get("purpose") == "main" and "iterations" in res:
             its.append(int(res["iterations"]))
-    if not its:
-        return None
-    its.sort()
-    mid = len(its) // 2
-    return its[mid] if len(its) % 2 else (its[mid - 1] + its[mid]) // 2
+    return int(statistics.median(its)) if its else None
 
 
 def fmt_duration(s: float) -> str:
