@@ -66,6 +66,8 @@ def machine_info(threads: int) -> dict:
     commit = git("rev-parse", "HEAD")
     # The study's own results are tracked and rewritten while it runs: they do not make the code dirty.
     dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!benchmarks/results"))
+    # ... and whether those changes reach the binary (or only scripts and documents).
+    dirty_compiled = bool(git("status", "--porcelain", "--untracked-files=no", "--", *plan.COMPILED_SOURCES))
     load = None
     try:
         load = os.getloadavg()
@@ -73,7 +75,7 @@ def machine_info(threads: int) -> dict:
         pass
     return {"cpu": cpu, "cores": os.cpu_count(), "memory_gb": mem_gb, "os": platform.platform(),
             "python": platform.python_version(), "commit": commit or "unknown", "dirty": dirty,
-            "threads": threads, "load_at_start": load}
+            "dirty_compiled": dirty_compiled, "threads": threads, "load_at_start": load}
 
 
 def run_command(binary: Path, run: plan.Run, threads: int, out_file: Path, image_prefix: Path | None) -> list[str]:
@@ -106,7 +108,7 @@ def config_of(cmd: list[str]) -> list[str]:
     return out
 
 
-PASS_KEYS = ("started", "finished", "commit", "dirty", "command", "wall_seconds", "runs_done", "runs_reused")
+PASS_KEYS = ("started", "finished", "commit", "dirty", "dirty_compiled", "command", "wall_seconds", "runs_done", "runs_reused")
 
 
 def estimate(runs: list[plan.Run]) -> float:
@@ -195,9 +197,10 @@ def main() -> int:
         meta.update({"mode": mode, "started": dt.datetime.now().astimezone().isoformat(timespec="seconds"),
                      "finished": None, "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
                      "planned_runs": len(runs), "estimated_seconds": estimate(runs)})
-        # A study is often run in several passes (resumed, more seeds): keep what each earlier pass did.
+        # A study is often run in several passes (resumed, more seeds, some methods repeated with
+        # --fresh): keep what each earlier pass did; the report lists those that still own runs.
         passes = []
-        if meta_file.exists() and not args.fresh:
+        if meta_file.exists():
             try:
                 old = json.loads(meta_file.read_text())
                 passes = old.get("passes") or [{k: old.get(k) for k in PASS_KEYS}]

@@ -234,3 +234,9 @@ def _unique(runs):
             seen.add(r.key)
             out.append(r)
     return out
+
+
+# What study_run is compiled from, as git pathspecs: two commits (or a commit and the working
+# tree) that agree on these build the same binary; the study's scripts and documents are not in it.
+COMPILED_SOURCES = ["include", "apps", "benchmarks/study", "benchmarks/CMakeLists.txt", "CMakeLists.txt", "cmake",
+                    ":(exclude)*.py", ":(exclude)*.md"]

@@ -14,6 +14,7 @@ import csv
 import json
 import math
 import statistics
+import subprocess
 from collections import defaultdict
 from pathlib import Path
 
@@ -56,7 +57,7 @@ def load_runs(out_dir: Path) -> list[dict]:
             "fingerprint": fin.get("heights_fingerprint"), "seconds": r["seconds"], "iterations": r["iterations"],
             "eps": r.get("evaluations_per_second", r["iterations_per_second"]), "trace": rows,
             "levels": r["trace"]["levels"], "threads": r["threads"], "start": r.get("start") or {},
-            "model": r.get("model") or {}, "max_iterations": r.get("max_iterations", 0),
+            "model": r.get("model") or {}, "max_iterations": r.get("max_iterations", 0), "pass": s.get("pass"),
         })
     return runs
 
@@ -530,24 +531,53 @@ def header(st: Study) -> list[str]:
         md += [f"> **Incomplete**: {len(missing)} of the {len(planned)} planned runs are not on disk (first missing: "
                f"`{missing[0].key}`). Statistics cover the runs that exist.", ""]
     passes = meta.get("passes") or []
-    load = meta.get("load_at_start")
-    total = meta.get("wall_seconds")
+    owned = defaultdict(int)  # runs on disk per pass (1-based, as run_study.py numbers them)
+    for r in st.runs:
+        owned[r["pass"]] += 1
+    live = [(i + 1, p) for i, p in enumerate(passes) if owned.get(i + 1)]
     rows = [
-        ["date", f"{(passes[0].get('started') if passes else None) or meta.get('started', '?')} → "
+        ["date", f"{(live[0][1].get('started') if live else None) or meta.get('started', '?')} → "
                  f"{meta.get('finished') or 'stopped part-way'}"],
         ["machine", f"{meta.get('cpu')}, {meta.get('cores')} cores, {meta.get('memory_gb')} GB, {meta.get('os')}"],
-        ["load average at start", ", ".join(f"{x:.2f}" for x in load) if load else "–"],
-        ["commit", f"`{meta.get('commit')}`" + (" (with uncommitted changes)" if meta.get("dirty") else "")],
         ["threads per run", str(meta.get("threads"))],
         ["runs", f"{len(st.runs)} on disk of {len(planned)} planned, {len(meta.get('runs_failed', []))} failed"],
-        ["study wall time", f"{total / 60:.1f} min" if total else "–"],
-        ["command", f"`{meta.get('command', '')}`"],
     ]
-    if len(passes) > 1:
-        rows += [[f"pass {i + 1}", f"{p.get('finished') or '?'}: {p.get('runs_done') or 0} runs, commit "
-                  f"`{(p.get('commit') or '?')[:10]}`, `{p.get('command', '')}`"] for i, p in enumerate(passes)]
+    for n, p in live:
+        minutes = f"{p['wall_seconds'] / 60:.1f} min, " if p.get("wall_seconds") else ""
+        rows.append([f"pass {n}", f"{p.get('finished') or '?'}: {owned[n]} of its {p.get('runs_done') or 0} runs "
+                     f"on disk, {minutes}commit `{(p.get('commit') or '?')[:10]}`"
+                     + dirt(p) + f", `{p.get('command', '')}`"])
+    rows.append(["build", same_build([p.get("commit") for _, p in live])])
     md += [table(["", ""], rows), ""]
     return md
+
+
+def dirt(p: dict) -> str:
+    """What a pass's uncommitted changes were, as far as it recorded."""
+    if not p.get("dirty"):
+        return ""
+    compiled = p.get("dirty_compiled")
+    if compiled is None:
+        return " (with uncommitted changes; which files, not recorded)"
+    return " (with uncommitted changes to **compiled sources**)" if compiled else \
+        " (with uncommitted changes to scripts or documents only)"
+
+
+def same_build(commits: list) -> str:
+    """Whether the passes' commits differ in what study_run is compiled from (asks git)."""
+    commits = list(dict.fromkeys(c for c in commits if c))
+    if len(commits) < 2:
+        return "one pass, one build"
+    root = Path(__file__).resolve().parents[2]
+    try:
+        changed = [c for c in commits[1:] if subprocess.run(
+            ["git", "diff", "--quiet", commits[0], c, "--", *plan.COMPILED_SOURCES], cwd=root).returncode != 0]
+    except OSError:
+        return "not checked (no git)"
+    if changed:
+        return "**the compiled sources differ** between passes: " + ", ".join(f"`{c[:10]}`" for c in changed)
+    return (f"every pass built from the same sources ({', '.join(f'`{c[:10]}`' for c in commits)} differ only "
+            f"in scripts and documents: `git diff --quiet` over {', '.join(plan.COMPILED_SOURCES[:6])})")
 
 
 def build(out_dir: Path, meta: dict, quick: bool) -> Path:

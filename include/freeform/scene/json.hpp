@@ -21,6 +21,7 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <type_traits>
 #include <utility>
 #include <variant>
 #include <vector>
@@ -670,182 +671,149 @@ inline json levels_json(const std::vector<LevelPlan>& levels) {
     return out;
 }
 
-// The optimiser keys, one row each: name, how to read it (validating), how to write it.
-// Adding a setting is adding a row (and a field to OptimiseSpec).
+// The optimiser keys, one row each. Most are a plain field of OptimiseSpec (a number, an
+// integer or a flag) read within [lo, hi] ([lo, hi) when hi_open) and written as it is;
+// the rest name a reader and a writer of their own. Adding a setting is adding a row (and
+// a field to OptimiseSpec).
+using OptimiseField = std::variant<std::monostate, double OptimiseSpec::*, int OptimiseSpec::*,
+                                   std::int64_t OptimiseSpec::*, std::uint64_t OptimiseSpec::*, bool OptimiseSpec::*>;
+
 struct OptimiseKey {
     std::string_view name;
-    void (*read)(const json& v, const std::string& path, OptimiseSpec& o);
-    void (*write)(const OptimiseSpec& o, json& j);
+    OptimiseField field{};
+    double lo = 0, hi = std::numeric_limits<double>::infinity();  // integers: hi = inf is no upper bound
+    bool hi_open = false;
+    void (*read)(const json& v, const std::string& path, OptimiseSpec& o) = nullptr;
+    void (*write)(const OptimiseSpec& o, std::string_view name, json& j) = nullptr;
 };
 
+// Keys that are not a plain field.
+inline void read_time_budget(const json& v, const std::string& p, OptimiseSpec& o) { o.time_budget = positive(v, p); }
+inline void write_time_budget(const OptimiseSpec& o, std::string_view n, json& j) { j[std::string(n)] = o.time_budget; }
+
+inline void read_levels_key(const json& v, const std::string& p, OptimiseSpec& o) { o.levels = read_levels(v, p); }
+inline void write_levels_key(const OptimiseSpec& o, std::string_view n, json& j) {
+    if (!o.levels.empty()) j[std::string(n)] = levels_json(o.levels);
+}
+
+inline void read_start_level(const json& v, const std::string& p, OptimiseSpec& o) {
+    if (v.is_string() && v.get<std::string>() == "auto")
+        o.start_level = -1;
+    else if (v.is_number_integer())
+        o.start_level = int(integer(v, p, 0, 16));
+    else
+        throw error(p, "expected \"auto\" or the index of the first planned level to run (0 = the coarsest), got " +
+                           describe(v));
+}
+inline void write_start_level(const OptimiseSpec& o, std::string_view n, json& j) {
+    j[std::string(n)] = o.start_level < 0 ? json("auto") : json(o.start_level);
+}
+
+inline void read_export_subdivisions(const json& v, const std::string& p, OptimiseSpec& o) {
+    if (v.is_string() && v.get<std::string>() == "auto")
+        o.export_subdivisions = 0;
+    else if (v.is_number_integer())
+        o.export_subdivisions = int(integer(v, p, 1, 64));
+    else
+        throw error(p, "expected \"auto\" or a subdivision level from 1 to 64, got " + describe(v));
+}
+inline void write_export_subdivisions(const OptimiseSpec& o, std::string_view n, json& j) {
+    j[std::string(n)] = o.export_subdivisions <= 0 ? json("auto") : json(o.export_subdivisions);
+}
+
+// An enum field M whose names, in its values' order, are Names (scene/scene.hpp).
+template <auto M, const auto& Names>
+void read_enum_key(const json& v, const std::string& p, OptimiseSpec& o) {
+    o.*M = enumeration<std::remove_cvref_t<decltype(o.*M)>>(v, p, Names);
+}
+template <auto M, const auto& Names>
+void write_enum_key(const OptimiseSpec& o, std::string_view n, json& j) {
+    j[std::string(n)] = Names[std::size_t(o.*M)];
+}
+
 inline std::span<const OptimiseKey> optimise_keys() {
+    using S = OptimiseSpec;
+    static constexpr double any = std::numeric_limits<double>::infinity();
     static constexpr OptimiseKey table[] = {
-        {"time_budget", [](const json& v, const std::string& p, OptimiseSpec& o) { o.time_budget = positive(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["time_budget"] = o.time_budget; }},
-        {"seed", [](const json& v, const std::string& p, OptimiseSpec& o) { o.seed = unsigned_integer(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["seed"] = o.seed; }},
-        {"max_iterations",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.max_iterations = integer(v, p, 0); },
-         [](const OptimiseSpec& o, json& j) { j["max_iterations"] = o.max_iterations; }},
-        {"target_error",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.target_error = number_in(v, p, 0, 1, true); },
-         [](const OptimiseSpec& o, json& j) { j["target_error"] = o.target_error; }},
-        {"threads",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.threads = int(integer(v, p, 0, 65536)); },
-         [](const OptimiseSpec& o, json& j) { j["threads"] = o.threads; }},
-        {"speculative",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.speculative = int(integer(v, p, 0, 256)); },
-         [](const OptimiseSpec& o, json& j) { j["speculative"] = o.speculative; }},
-        {"levels", [](const json& v, const std::string& p, OptimiseSpec& o) { o.levels = read_levels(v, p); },
-         [](const OptimiseSpec& o, json& j) {
-             if (!o.levels.empty()) j["levels"] = levels_json(o.levels);
-         }},
-        {"multilevel", [](const json& v, const std::string& p, OptimiseSpec& o) { o.multilevel = boolean(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["multilevel"] = o.multilevel; }},
-        {"start_level",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             if (v.is_string() && v.get<std::string>() == "auto")
-                 o.start_level = -1;
-             else if (v.is_number_integer())
-                 o.start_level = int(integer(v, p, 0, 16));
-             else
-                 throw error(p, "expected \"auto\" or the index of the first planned level to run (0 = the coarsest), got " +
-                                    describe(v));
-         },
-         [](const OptimiseSpec& o, json& j) {
-             if (o.start_level < 0)
-                 j["start_level"] = "auto";
-             else
-                 j["start_level"] = o.start_level;
-         }},
-        {"refine_initial_acceptance",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.refine_initial_acceptance = number_in(v, p, 1e-6, 0.999); },
-         [](const OptimiseSpec& o, json& j) { j["refine_initial_acceptance"] = o.refine_initial_acceptance; }},
-        {"refine_max_shift_cells",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.refine_max_shift_cells = number_in(v, p, 0.01, 100); },
-         [](const OptimiseSpec& o, json& j) { j["refine_max_shift_cells"] = o.refine_max_shift_cells; }},
-        {"coarse_rays_per_cell",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.coarse_rays_per_cell = number_in(v, p, 0, 1 << 20); },
-         [](const OptimiseSpec& o, json& j) { j["coarse_rays_per_cell"] = o.coarse_rays_per_cell; }},
-        {"min_rays_per_mesh_cell",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.min_rays_per_mesh_cell = number_in(v, p, 0, 1 << 16);
-         },
-         [](const OptimiseSpec& o, json& j) { j["min_rays_per_mesh_cell"] = o.min_rays_per_mesh_cell; }},
-        {"initial_temperature_scale",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.initial_temperature_scale = number_in(v, p, 1e-6, 1e6);
-         },
-         [](const OptimiseSpec& o, json& j) { j["initial_temperature_scale"] = o.initial_temperature_scale; }},
-        {"held_out_checks",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.held_out_checks = boolean(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["held_out_checks"] = o.held_out_checks; }},
-        {"sobel_weight",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.sobel_weight = number_in(v, p, 0, 10); },
-         [](const OptimiseSpec& o, json& j) { j["sobel_weight"] = o.sobel_weight; }},
-        {"energy_threshold",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.energy_threshold = number_in(v, p, 0, 1); },
-         [](const OptimiseSpec& o, json& j) { j["energy_threshold"] = o.energy_threshold; }},
-        {"lost_light_weight",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.lost_light_weight = number_in(v, p, 0, 100); },
-         [](const OptimiseSpec& o, json& j) { j["lost_light_weight"] = o.lost_light_weight; }},
-        {"height_bound_weight",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.height_bound_weight = number_in(v, p, 0, 1e6); },
-         [](const OptimiseSpec& o, json& j) { j["height_bound_weight"] = o.height_bound_weight; }},
-        {"valley_weight",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.valley_weight = number_in(v, p, 0, 1e6); },
-         [](const OptimiseSpec& o, json& j) { j["valley_weight"] = o.valley_weight; }},
-        {"valley_min_angle",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.valley_min_angle = number_in(v, p, 0, 180); },
-         [](const OptimiseSpec& o, json& j) { j["valley_min_angle"] = o.valley_min_angle; }},
-        {"smoothness_weight",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.smoothness_weight = number_in(v, p, 0, 1e6); },
-         [](const OptimiseSpec& o, json& j) { j["smoothness_weight"] = o.smoothness_weight; }},
-        {"evaluation",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.evaluation = enumeration<EvaluationMode>(v, p, evaluation_names);
-         },
-         [](const OptimiseSpec& o, json& j) { j["evaluation"] = to_string(o.evaluation); }},
-        {"kernel_shapes",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.kernel_shapes = enumeration<KernelShapes>(v, p, kernel_shape_names);
-         },
-         [](const OptimiseSpec& o, json& j) { j["kernel_shapes"] = to_string(o.kernel_shapes); }},
-        {"bandit",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.bandit = enumeration<BanditKind>(v, p, bandit_kind_names);
-         },
-         [](const OptimiseSpec& o, json& j) { j["bandit"] = to_string(o.bandit); }},
-        {"bandit_sync",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.bandit_sync = int(integer(v, p, 1, 1 << 20)); },
-         [](const OptimiseSpec& o, json& j) { j["bandit_sync"] = o.bandit_sync; }},
-        {"preprocess_iterations",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.preprocess_iterations = integer(v, p, 0); },
-         [](const OptimiseSpec& o, json& j) { j["preprocess_iterations"] = o.preprocess_iterations; }},
-        {"preprocess_keep",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.preprocess_keep = int(integer(v, p, 1, 64)); },
-         [](const OptimiseSpec& o, json& j) { j["preprocess_keep"] = o.preprocess_keep; }},
-        {"error_guided",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.error_guided = boolean(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["error_guided"] = o.error_guided; }},
-        {"single_vertex",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.single_vertex = boolean(v, p); },
-         [](const OptimiseSpec& o, json& j) { j["single_vertex"] = o.single_vertex; }},
-        {"max_shift_cells",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.max_shift_cells = number_in(v, p, 1e-6, 1e4); },
-         [](const OptimiseSpec& o, json& j) { j["max_shift_cells"] = o.max_shift_cells; }},
-        {"min_shift_cells",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.min_shift_cells = number_in(v, p, 0, 1e4); },
-         [](const OptimiseSpec& o, json& j) { j["min_shift_cells"] = o.min_shift_cells; }},
-        {"initial_acceptance",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.initial_acceptance = number_in(v, p, 1e-6, 0.999);
-         },
-         [](const OptimiseSpec& o, json& j) { j["initial_acceptance"] = o.initial_acceptance; }},
-        {"cooling",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.cooling = number_in(v, p, 1e-6, 1); },
-         [](const OptimiseSpec& o, json& j) { j["cooling"] = o.cooling; }},
-        {"temperature_steps",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.temperature_steps = int(integer(v, p, 1, 1 << 24));
-         },
-         [](const OptimiseSpec& o, json& j) { j["temperature_steps"] = o.temperature_steps; }},
-        {"reheat_factor",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.reheat_factor = number_in(v, p, 1e-6, 1); },
-         [](const OptimiseSpec& o, json& j) { j["reheat_factor"] = o.reheat_factor; }},
-        {"patience_fraction",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.patience_fraction = number_in(v, p, 0, 1); },
-         [](const OptimiseSpec& o, json& j) { j["patience_fraction"] = o.patience_fraction; }},
-        {"smooth_iterations",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.smooth_iterations = int(integer(v, p, 0, 10000));
-         },
-         [](const OptimiseSpec& o, json& j) { j["smooth_iterations"] = o.smooth_iterations; }},
-        {"export_subdivisions",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             if (v.is_string() && v.get<std::string>() == "auto")
-                 o.export_subdivisions = 0;
-             else if (v.is_number_integer())
-                 o.export_subdivisions = int(integer(v, p, 1, 64));
-             else
-                 throw error(p, "expected \"auto\" or a subdivision level from 1 to 64, got " + describe(v));
-         },
-         [](const OptimiseSpec& o, json& j) {
-             if (o.export_subdivisions <= 0)
-                 j["export_subdivisions"] = "auto";
-             else
-                 j["export_subdivisions"] = o.export_subdivisions;
-         }},
-        {"export_tolerance",
-         [](const json& v, const std::string& p, OptimiseSpec& o) { o.export_tolerance = number_in(v, p, 0.01, 10); },
-         [](const OptimiseSpec& o, json& j) { j["export_tolerance"] = o.export_tolerance; }},
-        {"export_max_triangles",
-         [](const json& v, const std::string& p, OptimiseSpec& o) {
-             o.export_max_triangles = integer(v, p, 1000, 1'000'000'000);
-         },
-         [](const OptimiseSpec& o, json& j) { j["export_max_triangles"] = o.export_max_triangles; }},
+        {.name = "time_budget", .read = read_time_budget, .write = write_time_budget},
+        {"seed", &S::seed},
+        {"max_iterations", &S::max_iterations, 0, any},
+        {"target_error", &S::target_error, 0, 1, true},
+        {"threads", &S::threads, 0, 65536},
+        {"speculative", &S::speculative, 0, 256},
+        {.name = "levels", .read = read_levels_key, .write = write_levels_key},
+        {"multilevel", &S::multilevel},
+        {.name = "start_level", .read = read_start_level, .write = write_start_level},
+        {"refine_initial_acceptance", &S::refine_initial_acceptance, 1e-6, 0.999},
+        {"refine_max_shift_cells", &S::refine_max_shift_cells, 0.01, 100},
+        {"coarse_rays_per_cell", &S::coarse_rays_per_cell, 0, 1 << 20},
+        {"min_rays_per_mesh_cell", &S::min_rays_per_mesh_cell, 0, 1 << 16},
+        {"initial_temperature_scale", &S::initial_temperature_scale, 1e-6, 1e6},
+        {"held_out_checks", &S::held_out_checks},
+        {"sobel_weight", &S::sobel_weight, 0, 10},
+        {"energy_threshold", &S::energy_threshold, 0, 1},
+        {"lost_light_weight", &S::lost_light_weight, 0, 100},
+        {"height_bound_weight", &S::height_bound_weight, 0, 1e6},
+        {"valley_weight", &S::valley_weight, 0, 1e6},
+        {"valley_min_angle", &S::valley_min_angle, 0, 180},
+        {"smoothness_weight", &S::smoothness_weight, 0, 1e6},
+        {.name = "evaluation",
+         .read = read_enum_key<&S::evaluation, evaluation_names>,
+         .write = write_enum_key<&S::evaluation, evaluation_names>},
+        {.name = "kernel_shapes",
+         .read = read_enum_key<&S::kernel_shapes, kernel_shape_names>,
+         .write = write_enum_key<&S::kernel_shapes, kernel_shape_names>},
+        {.name = "bandit",
+         .read = read_enum_key<&S::bandit, bandit_kind_names>,
+         .write = write_enum_key<&S::bandit, bandit_kind_names>},
+        {"bandit_sync", &S::bandit_sync, 1, 1 << 20},
+        {"preprocess_iterations", &S::preprocess_iterations, 0, any},
+        {"preprocess_keep", &S::preprocess_keep, 1, 64},
+        {"error_guided", &S::error_guided},
+        {"single_vertex", &S::single_vertex},
+        {"max_shift_cells", &S::max_shift_cells, 1e-6, 1e4},
+        {"min_shift_cells", &S::min_shift_cells, 0, 1e4},
+        {"initial_acceptance", &S::initial_acceptance, 1e-6, 0.999},
+        {"cooling", &S::cooling, 1e-6, 1},
+        {"temperature_steps", &S::temperature_steps, 1, 1 << 24},
+        {"reheat_factor", &S::reheat_factor, 1e-6, 1},
+        {"patience_fraction", &S::patience_fraction, 0, 1},
+        {"smooth_iterations", &S::smooth_iterations, 0, 10000},
+        {.name = "export_subdivisions", .read = read_export_subdivisions, .write = write_export_subdivisions},
+        {"export_tolerance", &S::export_tolerance, 0.01, 10},
+        {"export_max_triangles", &S::export_max_triangles, 1000, 1'000'000'000},
     };
     return table;
+}
+
+// Reads key k from v into o: its own reader, or its field within [lo, hi].
+inline void read_optimise_key(const OptimiseKey& k, const json& v, const std::string& p, OptimiseSpec& o) {
+    if (k.read) return k.read(v, p, o);
+    const auto bound = [](double x) {  // an integer bound; inf: none
+        return x >= 9.2e18 ? std::numeric_limits<std::int64_t>::max() : std::int64_t(x);
+    };
+    std::visit(
+        [&](auto m) {
+            using M = decltype(m);
+            if constexpr (std::is_same_v<M, double OptimiseSpec::*>)
+                o.*m = number_in(v, p, k.lo, k.hi, k.hi_open);
+            else if constexpr (std::is_same_v<M, bool OptimiseSpec::*>)
+                o.*m = boolean(v, p);
+            else if constexpr (std::is_same_v<M, std::uint64_t OptimiseSpec::*>)
+                o.*m = unsigned_integer(v, p);
+            else if constexpr (!std::is_same_v<M, std::monostate>)  // int or int64
+                o.*m = std::remove_reference_t<decltype(o.*m)>(integer(v, p, bound(k.lo), bound(k.hi)));
+        },
+        k.field);
+}
+
+inline void write_optimise_key(const OptimiseKey& k, const OptimiseSpec& o, json& j) {
+    if (k.write) return k.write(o, k.name, j);
+    std::visit(
+        [&](auto m) {
+            if constexpr (!std::is_same_v<decltype(m), std::monostate>) j[std::string(k.name)] = o.*m;
+        },
+        k.field);
 }
 
 inline OptimiseSpec read_optimise(const json& j, const std::string& path) {
@@ -855,7 +823,7 @@ inline OptimiseSpec read_optimise(const json& j, const std::string& path) {
     o.only(keys);
     OptimiseSpec spec;
     for (const auto& k : optimise_keys())
-        if (const json* v = o.find(k.name)) k.read(*v, o.at(k.name), spec);
+        if (const json* v = o.find(k.name)) read_optimise_key(k, *v, o.at(k.name), spec);
     return spec;
 }
 
@@ -976,7 +944,7 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     out["trace"] = json{{"tracer", enum_name(s.trace.tracer, tracer_names)}, {"max_depth", s.trace.max_depth}};
     if (s.trace.fresnel) out["trace"]["fresnel"] = true;
     json opt = json::object();
-    for (const auto& k : optimise_keys()) k.write(s.optimise, opt);
+    for (const auto& k : optimise_keys()) write_optimise_key(k, s.optimise, opt);
     out["optimise"] = opt;
     return out;
 }
