@@ -2,6 +2,7 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -302,6 +303,70 @@ TEST_CASE("maintained histogram and objective equal a full recompute after 10,00
         });
         const Traced full = trace_scene(s.scene, s.hm, s.rays);
         CHECK(problem.histogram() == full.histogram);
+    }
+}
+
+namespace {
+
+// `steps` proposals from `seed`, accepted at random (40 %), on each problem alike; their
+// objectives must agree exactly after every step.
+template <class... Problems>
+void same_moves(std::uint64_t seed, int steps, Problems&... problems) {
+    std::array<SurfaceProblem::Move, sizeof...(Problems)> moves;
+    CounterRng pick(seed, 1);
+    for (std::uint64_t it = 0; it < std::uint64_t(steps); ++it) {
+        const bool take = pick.uniform() < 0.4;
+        std::size_t k = 0;
+        std::array<double, sizeof...(Problems)> totals{};
+        (
+            [&](auto& p) {
+                CounterRng rng(seed, 1000 + it);
+                auto& m = moves[k];
+                p.propose(rng, 1.0, m);
+                p.delta(m);
+                if (take)
+                    p.accept(m);
+                else
+                    p.reject(m);
+                if ((it + 1) % 64 == 0) p.sync();
+                totals[k++] = p.value().total;
+            }(problems),
+            ...);
+        for (std::size_t j = 1; j < totals.size(); ++j) REQUIRE(totals[j] == totals[0]);
+    }
+}
+
+}  // namespace
+
+TEST_CASE("a problem built on the trace of the one before it follows a rebuilt one move for move") {
+    // The designer hands a level's trace from stage to stage instead of tracing every ray
+    // again (design/designer.hpp, make_problem): the result must not change.
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        Setup s = make_setup(c);
+        SurfaceProblem first(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("history", 7),
+                             1e-4, 1.0);
+        same_moves(5, 1500, first);
+        IncrementalTrace handed = first.take_trace();
+        Heightmap copy = s.hm;
+        const ProposalSettings next = proposals();
+        SurfaceProblem reused(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+                              1.0, {}, &handed);
+        CHECK(handed.records().empty());  // moved in, not traced again
+        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+                               1.0);
+        CHECK(reused.value().total == rebuilt.value().total);
+        CHECK(reused.histogram() == rebuilt.histogram());
+        same_moves(9, 1500, reused, rebuilt);
+        CHECK(s.hm.heights() == copy.heights());
+        CHECK(reused.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+        // A trace of another surface is not taken: that problem traces its rays itself.
+        IncrementalTrace other = rebuilt.take_trace();
+        const std::size_t records = other.records().size();
+        SurfaceProblem elsewhere(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+                                 1.0, {}, &other);
+        CHECK(other.records().size() == records);
+        CHECK(elsewhere.histogram() == reused.histogram());
     }
 }
 

@@ -461,6 +461,9 @@ struct LevelSetup {
     double unit = 1;
     std::optional<HeldOutCheck> held_out;
     std::size_t stages = 1;
+    // The trace the level's last problem kept consistent with the surface, for the next
+    // one (stateless backends: design/problem.hpp): one full trace per level, not per stage.
+    std::optional<IncrementalTrace> trace;
 };
 
 // The multi-level schedule of one design (docs/architecture.md, "The path of a scene
@@ -559,10 +562,18 @@ class Designer {
         if (stop_ && li + 1 < levels_.size()) evaluate_on_final_mesh();
     }
 
-    Problem make_problem(const LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
+    // The level's trace, if an earlier problem left one, passes to the new problem.
+    Problem make_problem(LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
+        std::optional<IncrementalTrace> reuse = std::exchange(L.trace, std::nullopt);
         return Problem(surface_, L.rays, L.params,
                        make_target(target_image_, L.receiver.width, L.receiver.height, target_total(L.rays, L.params)),
-                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0, backend());
+                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0, backend(),
+                       reuse ? &*reuse : nullptr);
+    }
+
+    // What a problem leaves for the next one on this level (see make_problem).
+    static void keep_trace(LevelSetup& L, Problem& problem) {
+        if constexpr (requires { requires Backend::stateless; }) L.trace.emplace(problem.take_trace());
     }
 
     // The backend, held to the design's thread count (its full rebuilds included).
@@ -574,7 +585,7 @@ class Designer {
 
     // The history bandit's pre-process (reference §4.3.2): a short run with every shape
     // equally likely, then only the shapes that paid best are kept.
-    void preprocess(const LevelSetup& L, int support, std::uint64_t stage_seed) {
+    void preprocess(LevelSetup& L, int support, std::uint64_t stage_seed) {
         ProposalSettings all = proposals_for(moves_, support);
         const int arms = int(all.bank.size());
         Problem pre = make_problem(L, std::move(all), make_bandit(BanditKind::uniform, arms, options_.bandit_sync));
@@ -598,6 +609,7 @@ class Designer {
         kept_arms_ = HistoryBandit::preselect(rate, std::min(options_.preprocess_keep, arms));
         std::sort(kept_arms_.begin(), kept_arms_.end());
         result_.preprocess_rates = rate;
+        keep_trace(L, pre);
     }
 
     bool wants_preprocess(std::size_t li, std::size_t si) const {
@@ -758,7 +770,10 @@ class Designer {
             report.held_out_checks = held_best.checks;
         }
         end_stage(problem, ar, report, stage_start, hooks.stopped);
-        if (last || stop_) keep_result(problem, ps, report, L, held_out, held_best);
+        if (last || stop_)
+            keep_result(problem, ps, report, L, held_out, held_best);
+        else
+            keep_trace(L, problem);
     }
 
     void end_stage(const Problem& problem, const AnnealResult& ar, StageReport& report, double stage_start,

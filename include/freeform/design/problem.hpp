@@ -41,6 +41,9 @@ struct ProposalSettings {
 // restore, so their deltas run one at a time.
 struct HeightfieldBackend {
     static constexpr bool concurrent_deltas = true;
+    // All its state is in the IncrementalTrace, which can then pass from one problem to
+    // the next on the same surface (BasicSurfaceProblem's `reuse`).
+    static constexpr bool stateless = true;
     static constexpr const char* name = "heightfield";
     int threads = 0;  // of the full rebuilds (a level's start, replaced heights, merges); 0: every core
     Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp_t{threads}); }
@@ -55,6 +58,7 @@ struct HeightfieldBackend {
 // incremental backend, at the cost of a full trace; for comparisons and benchmarks).
 struct FullRetraceBackend {
     static constexpr bool concurrent_deltas = true;
+    static constexpr bool stateless = true;
     static constexpr const char* name = "full";
     int threads = 0;  // as HeightfieldBackend's
     Histogram rebuild(IncrementalTrace& trace) const { return trace.rebuild(exec::omp_t{threads}); }
@@ -88,10 +92,16 @@ public:
     // `metres_per_cell_shift`: the height amplitude that moves the light by one receiver
     // cell per grid unit of kernel width (see design/designer.hpp). `reference_temperature`
     // scales amplitudes with temperature.
+    //
+    // `reuse`: the trace of a problem before this one on the same surface, rays and path
+    // (take_trace()), which that problem kept consistent with the surface; it is moved in
+    // instead of tracing every ray again. Its invariant (trace/incremental.hpp: records and
+    // histogram equal a full retrace bit for bit) makes the problem the same as a rebuilt
+    // one. Only for stateless backends; a trace of other rays is ignored (full rebuild).
     BasicSurfaceProblem(Heightmap& surface, const RaySet& rays, const PathParams& params, Target target,
                           ObjectiveWeights weights, const Penalties& penalties, ProposalSettings proposals,
                           AnyBandit bandit, double metres_per_cell_shift, double reference_temperature,
-                          Backend backend = {})
+                          Backend backend = {}, IncrementalTrace* reuse = nullptr)
         : backend_(std::move(backend)), surface_(&surface), rays_(&rays), trace_(surface, rays, params),
           image_(std::move(target)),
           weights_(weights), penalties_(&penalties), proposals_(std::move(proposals)), bandit_(std::move(bandit)),
@@ -99,12 +109,26 @@ public:
         for (const auto& s : proposals_.bank) kernels_.emplace_back(s);
         if (!proposals_.single_vertex && kernels_.empty())
             throw InputError("optimise.kernels: the kernel bank is empty");
+        if constexpr (requires { requires Backend::stateless; }) {
+            if (reuse && &reuse->rays() == &rays && &reuse->surface() == &surface) {
+                trace_ = std::move(*reuse);
+                reset_sums(trace_.histogram());
+                return;
+            }
+        }
         rebuild();
     }
 
     // Full recompute of every maintained quantity (level start, after restore_best).
-    void rebuild() {
-        const Histogram h = backend_.rebuild(trace_);
+    void rebuild() { reset_sums(backend_.rebuild(trace_)); }
+
+    // Hands the trace to the next problem on this surface (the constructor's `reuse`);
+    // this problem is not to be used afterwards.
+    IncrementalTrace take_trace() { return std::move(trace_); }
+
+private:
+    // Every sum the problem maintains, from the irradiance of the current surface.
+    void reset_sums(const Histogram& h) {
         image_.reset(h);
         penalty_sum_ = penalties_->full(*surface_);
         value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
@@ -112,6 +136,7 @@ public:
         refresh_error_weights();
     }
 
+public:
     double energy() const { return value_.total; }
     const ObjectiveValue& value() const { return value_; }
     // Moves are centred only on the mesh rows [j0, j1) (domain decomposition: replicas
