@@ -147,6 +147,10 @@ struct AnnealOptions {
     // points, exchange points bound speculative windows, so they do not change the
     // trajectory by themselves.
     std::int64_t exchange_every = 0;
+    // End holding the best state seen (problems with restore_best()). Off: the caller
+    // decides what to keep (the designer judges the best with held-out rays first, so that
+    // the problem is retraced once, to the state it keeps: design/designer.hpp).
+    bool restore_best = true;
 };
 
 enum class StopReason { max_iterations, time_budget, target_energy, stall, min_temperature, callback };
@@ -442,7 +446,8 @@ public:
         result.reheats = reheats_;
         result.reason = reason;
         result.seconds = seconds();
-        if constexpr (HasRestoreBest<Problem>) problem_.restore_best();
+        if constexpr (HasRestoreBest<Problem>)
+            if (options_.restore_best) problem_.restore_best();
         {
             const AnnealState s = state();
             bool ignored = false;

@@ -748,8 +748,11 @@ class Designer {
         // Time: this stage's share of what is left of this level's share.
         const double level_end = options_.time_budget * (share_used_ + L.plan->time_share);
         const double stage_time = std::max(0.05, (level_end - clock_()) / double(L.stages - si));
-        const AnnealOptions ao =
-            stage_options(L, si, support, stage_seed, t0, cal.moves_per_second, stage_time, last);
+        AnnealOptions ao = stage_options(L, si, support, stage_seed, t0, cal.moves_per_second, stage_time, last);
+        // With held-out checks (and no replicas, whose merges read the restored state), the
+        // stage's end judges the fitted best before the problem is retraced: see keep_judged.
+        const bool judge_first = held_out && !replicas_.active();
+        ao.restore_best = !judge_first;
         const auto stage_start = clock_();
         Hooks hooks = stage_hooks(problem, L, si, report, held_out, held_best, support, stage_time);
         const AnnealResult ar = anneal(problem, ao, hooks);
@@ -759,13 +762,17 @@ class Designer {
         if (replicas_.shares_surface() && hooks.merged_at != ar.iterations)
             hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
         report.merges = hooks.merges;
-        if (held_out) {
+        if (judge_first) {
+            keep_judged(problem, *held_out, held_best, ar.iterations, report);
+        } else if (held_out) {
             // The annealer ends holding its best state on the fitted rays; a state the
             // held-out rays judged better replaces it.
             if (!held_best.offer(surface_, (*held_out)(surface_), ar.iterations)) {
                 problem.replace_heights(held_best.heights);
                 report.held_out_kept = held_best.iteration;
             }
+        }
+        if (held_out) {
             report.held_out_end = held_best.value.error;
             report.held_out_checks = held_best.checks;
         }
@@ -774,6 +781,28 @@ class Designer {
             keep_result(problem, ps, report, L, held_out, held_best);
         else
             keep_trace(L, problem);
+    }
+
+    // The stage's end when the annealer left its current state in place: its best state on
+    // the fitted rays is judged with the held-out rays on a copy of the surface, and the
+    // problem goes to the state the judge keeps (that one, or an earlier held-out best) with
+    // one full retrace, where restoring and then replacing took two. The same heights, and
+    // so the same design, as restoring first: under grazing light a retrace takes seconds.
+    void keep_judged(Problem& problem, HeldOutCheck& held_out, HeldOutBest& held_best, std::int64_t iteration,
+                     StageReport& report) {
+        const std::vector<float>* fitted = problem.best_heights();  // null: the current state is the best
+        Heightmap probe;
+        if (fitted) {
+            probe = surface_;
+            probe.set_heights(*fitted);
+        }
+        const Heightmap& best = fitted ? probe : surface_;
+        if (held_best.offer(best, held_out(best), iteration)) {
+            if (fitted) problem.replace_heights(held_best.heights);
+        } else {
+            problem.replace_heights(held_best.heights);
+            report.held_out_kept = held_best.iteration;
+        }
     }
 
     void end_stage(const Problem& problem, const AnnealResult& ar, StageReport& report, double stage_start,

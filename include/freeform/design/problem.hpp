@@ -231,6 +231,11 @@ public:
         best_heights_.clear();
     }
 
+    // The heights of the best state seen, or null when the current state is the best.
+    const std::vector<float>* best_heights() const {
+        return best_is_current_ || best_heights_.empty() ? nullptr : &best_heights_;
+    }
+
     // Puts the best state seen back in place (if the current one is worse).
     void restore_best() {
         if (best_is_current_ || best_heights_.empty()) return;
