@@ -34,8 +34,8 @@ import study_plan as plan  # noqa: E402
 
 # Seconds per run on top of its budget (start-up, target rendering, the final renders and
 # error_physical), measured on the 2-core development machine; the camera case traces 512
-# rays per cell for error_physical, and under grazing light our designer overshoots its budget (its per-stage
-# calibration is not counted against it, and moves are slow there).
+# rays per cell for error_physical, and under grazing light our designer overshoots its budget
+# (each full trace of the incremental index takes seconds there: README, "Performance").
 OVERHEAD = {"camera": 10.0, "grazing": 14.0, "headlight": 3.0}
 DEFAULT_OVERHEAD = 8.0
 

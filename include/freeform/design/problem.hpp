@@ -126,17 +126,6 @@ public:
     // this problem is not to be used afterwards.
     IncrementalTrace take_trace() { return std::move(trace_); }
 
-private:
-    // Every sum the problem maintains, from the irradiance of the current surface.
-    void reset_sums(const Histogram& h) {
-        image_.reset(h);
-        penalty_sum_ = penalties_->full(*surface_);
-        value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
-        best_is_current_ = true;
-        refresh_error_weights();
-    }
-
-public:
     double energy() const { return value_.total; }
     const ObjectiveValue& value() const { return value_; }
     // Moves are centred only on the mesh rows [j0, j1) (domain decomposition: replicas
@@ -238,8 +227,7 @@ public:
 
     // Puts the best state seen back in place (if the current one is worse).
     void restore_best() {
-        if (best_is_current_ || best_heights_.empty()) return;
-        replace_heights(best_heights_);
+        if (const std::vector<float>* best = best_heights()) replace_heights(*best);
     }
 
     // Sets the surface to `heights` (same mesh) and recomputes everything from them; the
@@ -252,6 +240,15 @@ public:
     }
 
 private:
+    // Every sum the problem maintains, from the irradiance of the current surface.
+    void reset_sums(const Histogram& h) {
+        image_.reset(h);
+        penalty_sum_ = penalties_->full(*surface_);
+        value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
+        best_is_current_ = true;
+        refresh_error_weights();
+    }
+
     void choose_centre(CounterRng& rng, int& ci, int& cj) const {
         const int nx = surface_->nx(), ny = surface_->ny();
         if (proposals_.error_guided && max_error_ > 0) {
