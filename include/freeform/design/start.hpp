@@ -113,17 +113,26 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
                                            std::uint64_t seed, int threads) {
     std::optional<TransportStart> best;
     const FlatFootprint fp = flat_footprint(scene, initial);
+    // A lens whose light would drift into its side walls aims the strips next to them at
+    // the walls (WallStrips), measured once on the cheaper grid.
+    TransportOptions strip_options;
+    strip_options.ot.threads = threads;
+    strip_options.cells_per_pixel = start_grid_cells_per_pixel.back();
+    double wall_fraction = 0;
+    const WallStrips strips = lens_wall_strips(scene, initial, target_image, seed, strip_options, wall_fraction);
     OtGrid tried{};
     for (const double cells_per_pixel : start_grid_cells_per_pixel) {
         TransportOptions options;
         options.ot.threads = threads;
         options.cells_per_pixel = cells_per_pixel;
+        options.strips = strips;
         const OtGrid g = transport_grid(scene, fp, options);
         if (g.nx == tried.nx && g.ny == tried.ny && g.hx == tried.hx) continue;
         tried = g;
         TransportMap map = solve_transport(scene, initial, target_image, seed, options);
         TransportReport fitted = map.report;
         Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
+        fitted.wall_fraction = wall_fraction;
         map.report = fitted;
         const SurfaceEvaluation eval = evaluate_surface(scene, surface, target_image, seed, threads);
         if (!best) {

@@ -69,6 +69,8 @@ inline nlohmann::json start_report_json(const StartReport& s) {
                           {"height_excess", t.height_excess},
                           {"fits_height_bounds", t.height_excess <= 0},
                           {"unmapped_fraction", t.unmapped_fraction},
+                          {"wall_strips", {{"margin", t.strip_margin}, {"wall_fraction", t.wall_fraction},
+                                           {"strip_light", t.strip_light}}},
                           {"cells_per_pixel", t.cells_per_pixel}};
         if (t.other_error >= 0)
             j["transport"]["other_grid"] = {{"cells_per_pixel", t.other_cells_per_pixel}, {"error", t.other_error}};

@@ -306,6 +306,7 @@ inline void pack_transport_report(Packer& p, const TransportReport& t) {
     p.put(t.grid_x), p.put(t.grid_y), p.put(t.cell_size), p.put(t.ot_iterations), p.put(t.ot_residual);
     p.put(t.ot_seconds), p.put(t.fit_seconds), p.put(t.fit_iterations), p.put(t.height_range);
     p.put(t.height_excess), p.put(t.unmapped_fraction);
+    p.put(t.strip_margin), p.put(t.wall_fraction), p.put(t.strip_light);
     p.put(t.cells_per_pixel), p.put(t.other_cells_per_pixel), p.put(t.other_error);
 }
 
@@ -316,6 +317,7 @@ inline void unpack_transport_report(Unpacker& u, TransportReport& t) {
     t.ot_iterations = u.get<int>(), t.ot_residual = u.get<double>();
     t.ot_seconds = u.get<double>(), t.fit_seconds = u.get<double>(), t.fit_iterations = u.get<int>();
     t.height_range = u.get<double>(), t.height_excess = u.get<double>(), t.unmapped_fraction = u.get<double>();
+    t.strip_margin = u.get<double>(), t.wall_fraction = u.get<double>(), t.strip_light = u.get<double>();
     t.cells_per_pixel = u.get<double>(), t.other_cells_per_pixel = u.get<double>(), t.other_error = u.get<double>();
 }
 

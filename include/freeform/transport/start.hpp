@@ -18,9 +18,12 @@
 // The result is judged by the exact tracer, never by the transport residual (the
 // designer does that and writes both to metrics.json).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 #include <variant>
@@ -39,6 +42,46 @@
 
 namespace freeform {
 
+// A lens's light leaves through its flat back face, and the body has side walls under the
+// face's edges (trace/path.hpp). A map that spreads the light wider than the lens tilts
+// every ray outwards inside the glass, so the rays that enter within a few millimetres of
+// an edge drift past it and meet the wall; total internal reflection there mirrors them
+// back across the receiver. Left to the plain map, an edge strip's light lands on the
+// centre row or column (a bright cross) and the receiver's edges go dark. No monotone map
+// avoids the walls: the ray entering at the very edge would have to leave straight down.
+// So the start uses them (docs/architecture.md §4b): the map carries the light of the
+// interior (the face less a strip along each such wall) onto the target, the interior's
+// edge reaching the receiver's edge; the strip's rays are aimed further out, up to the
+// lens's width beyond the map's goal at the wall (strip_goal), so that they meet the wall
+// and are mirrored into a band across the receiver. Aimed that way the strip continues the
+// interior's convex potential (a monotone map, no fold and no caustic), and where its
+// mirrored light lands is known: the map is solved for the target less that light.
+// Walls: 0 = −u, 1 = +u, 2 = −v, 3 = +v (surface frame); a zero margin is no strip.
+struct WallStrips {
+    std::array<double, 4> margin{};
+    double half_u = 0, half_v = 0;  // the lens body's half extents
+    // The map that places the strips' mirrored light when the start's map is solved (the
+    // plain map of lens_wall_strips); unset: the strips' light is not subtracted.
+    std::shared_ptr<const OtResult> placement;
+    std::shared_ptr<const Heightmap> placement_surface;  // the surface fitted to it (glass thickness)
+
+    bool any() const { return margin[0] > 0 || margin[1] > 0 || margin[2] > 0 || margin[3] > 0; }
+    double widest() const { return std::max({margin[0], margin[1], margin[2], margin[3]}); }
+
+    // The strip's inner edge nearest to the surface point s, and how far into the strip s
+    // lies along each axis (−1 at the −u or −v wall, 1 at the +u or +v wall, 0 inside).
+    Vec3d inner(Vec3d s, double& tu, double& tv) const {
+        const auto axis = [&](double x, double half, int lo, int hi, double& t) {
+            const double mlo = margin[std::size_t(lo)], mhi = margin[std::size_t(hi)];
+            t = 0;
+            if (mhi > 0 && x > half - mhi) return t = std::min(1.0, (x - (half - mhi)) / mhi), half - mhi;
+            if (mlo > 0 && x < -half + mlo) return t = -std::min(1.0, (-half + mlo - x) / mlo), -half + mlo;
+            return x;
+        };
+        return {axis(s.x, half_u, 0, 1, tu), axis(s.y, half_v, 2, 3, tv), s.z};
+    }
+};
+
 // How the map is computed: the back-and-forth OT solver (the default), or Poisson mesh
 // morphing (the alternative it is measured against in bench_transport).
 enum class TransportMethod { back_and_forth, morphing };
@@ -56,6 +99,7 @@ struct TransportOptions {
     double rays_per_grid_cell = 16;  // rays sampling the source footprint, per grid cell it covers
     int fit_iterations = 4;        // map → normals → heights rounds (near field)
     OtOptions ot{};
+    WallStrips strips{};           // a lens's wall strips (lens_wall_strips); none: the plain map
 };
 
 // What the transport start did, for metrics.json.
@@ -75,12 +119,17 @@ struct TransportReport {
     // The designer tries two grids and keeps the better start (design/start.hpp): the other
     // one's cells per pixel and its start's error under the exact tracer (−1: none tried).
     double other_cells_per_pixel = 0, other_error = -1;
+    // A lens's wall strips (WallStrips): the widest strip (metres; 0: none), the share of
+    // the vertices whose light the plain map sent into a side wall, and the share of the
+    // light the strips mirror onto the receiver (the target less it is what the map carries).
+    double strip_margin = 0, wall_fraction = 0, strip_light = 0;
 };
 
 // The transport map of a scene, reusable for several meshes.
 struct TransportMap {
     OtResult ot;                 // in receiver-local metres (u right, v up)
     TransportReport report;      // grid and solver fields filled
+    WallStrips strips;           // the lens's wall strips the map was solved with
 };
 
 namespace transport_detail {
@@ -134,6 +183,20 @@ struct Optics {
         return Vec2d{dot(q, ru), dot(q, rv)};
     }
 
+    // Inside a lens, the ray from surface point s that the flat back face refracts
+    // towards q: its direction g in the glass and its exit point e on the back face.
+    // Solved for e by fixed point.
+    void glass_path(Vec3d s, Vec3d q, Vec3d& g, Vec3d& e) const {
+        e = {s.x, s.y, -thickness}, g = {0, 0, -1};
+        for (int k = 0; k < 6; ++k) {
+            const Vec3d out = normalize(q - e);
+            const Vec3d t{out.x / ior, out.y / ior, 0};
+            const double tz = std::sqrt(std::max(1e-12, 1.0 - t.x * t.x - t.y * t.y));
+            g = {t.x, t.y, -tz};
+            e = s + g * ((s.z + thickness) / tz);
+        }
+    }
+
     // The unit normal at surface point s that sends light arriving along d_in to the
     // point q (surface frame): reflection, or refraction into the lens whose flat back
     // face then bends the ray towards q.
@@ -142,16 +205,8 @@ struct Optics {
         if (!lens) {
             n = normalize(q - s) - d_in;
         } else {
-            // The direction g inside the glass: the back face refracts it into the
-            // direction from the exit point e to q. Solve for e by fixed point.
-            Vec3d e{s.x, s.y, -thickness}, g{0, 0, -1};
-            for (int k = 0; k < 6; ++k) {
-                const Vec3d out = normalize(q - e);
-                const Vec3d t{out.x / ior, out.y / ior, 0};
-                const double tz = std::sqrt(std::max(1e-12, 1.0 - t.x * t.x - t.y * t.y));
-                g = {t.x, t.y, -tz};
-                e = s + g * ((s.z + thickness) / tz);
-            }
+            Vec3d g, e;
+            glass_path(s, q, g, e);
             n = d_in - ior * g;  // n1 d_in − n2 d_out, n1 = 1 outside
         }
         if (n.z < 0) n = -n;
@@ -194,6 +249,82 @@ inline void splat(Eigen::ArrayXXd& m, const OtGrid& g, double x, double y, doubl
     m(j, i + 1) += w * a * (1 - b);
     m(j + 1, i) += w * (1 - a) * b;
     m(j + 1, i + 1) += w * a * b;
+}
+
+// The height of `hm` at (u, v) (surface frame), bilinear between its vertices, clamped to
+// the grid.
+inline double height_at(const Heightmap& hm, double u, double v) {
+    const double fx = std::clamp((u - hm.u_of(0)) / hm.du(), 0.0, double(hm.nx() - 1));
+    const double fy = std::clamp((v - hm.v_of(0)) / hm.dv(), 0.0, double(hm.ny() - 1));
+    const int i = std::min(int(fx), hm.nx() - 2), j = std::min(int(fy), hm.ny() - 2);
+    const double a = fx - i, b = fy - j;
+    const auto h = [&](int x, int y) { return double(hm.heights()[std::size_t(y * hm.nx() + x)]); };
+    return (1 - b) * ((1 - a) * h(i, j) + a * h(i + 1, j)) + b * ((1 - a) * h(i, j + 1) + a * h(i + 1, j + 1));
+}
+
+// Where the rays of a wall strip aim (WallStrips): the map's own goal for s (the map
+// extends past the interior, smoothly), moved outwards along the receiver plane by the
+// lens's width along that axis times the square of how far into the strip s lies. The
+// square keeps the aim's slope continuous at the strip's inner edge: a kink there bends
+// the vertex normals of the interior's last cells (central differences) and starves the
+// receiver's edge. Surface frame.
+inline Vec3d strip_goal(const Optics& optics, const WallStrips& strips, const OtResult& map, Vec3d s, bool& landed) {
+    double tu = 0, tv = 0;
+    strips.inner(s, tu, tv);
+    const auto land = optics.flat_landing(s, optics.incoming(s));
+    landed = land.has_value();
+    if (!landed) return {};
+    const Vec2d q = map.transport(land->x, land->y);
+    const auto along = [&](Vec3d axis) { return normalize(axis - dot(axis, optics.rn) * optics.rn); };
+    return optics.rc + q.x * optics.ru + q.y * optics.rv + (2 * strips.half_u * tu * std::abs(tu)) * along(Vec3d{1, 0, 0}) +
+           (2 * strips.half_v * tv * std::abs(tv)) * along(Vec3d{0, 1, 0});
+}
+
+// Where the light of a strip ray entering at s (flat surface) lands, in receiver-local
+// metres: its path through the glass to the strip goal under `map`, mirrored by each wall
+// its exit lies beyond. Nothing when it misses the receiver plane.
+inline std::optional<Vec2d> strip_landing(const Optics& optics, const WallStrips& strips, const OtResult& map, Vec3d s) {
+    bool landed = false;
+    const Vec3d goal = strip_goal(optics, strips, map, s, landed);
+    if (!landed) return std::nullopt;
+    Vec3d g, e;
+    optics.glass_path(Vec3d{s.x, s.y, strips.placement_surface ? height_at(*strips.placement_surface, s.x, s.y) : 0.0},
+                      goal, g, e);
+    Vec3d out = normalize(goal - e);
+    if (std::abs(e.x) > strips.half_u) e.x = std::copysign(2 * strips.half_u, e.x) - e.x, out.x = -out.x;
+    if (std::abs(e.y) > strips.half_v) e.y = std::copysign(2 * strips.half_v, e.y) - e.y, out.y = -out.y;
+    const double dn = dot(out, optics.rn);
+    if (!(dn < 0)) return std::nullopt;
+    const double t = dot(optics.rc - e, optics.rn) / dn;
+    if (!(t > 0)) return std::nullopt;
+    const Vec3d q = e + t * out - optics.rc;
+    return Vec2d{dot(q, optics.ru), dot(q, optics.rv)};
+}
+
+// Adds the light of the strip ray entering at s to `placed` (the light the strips
+// mirror onto the receiver, on the transport grid). The ray stands for the strip's light
+// over about `spacing` around s, which the strip's aim stretches by its reach over its
+// margin along the wall's normal: it is spread over that stretch in as many pieces, about
+// one per grid cell (a single sample per ray would leave most grid lines empty and stripe
+// the map that is solved for the target less this light).
+inline void place_strip_ray(Eigen::ArrayXXd& placed, const OtGrid& g, const Optics& optics, const WallStrips& strips,
+                            Vec3d s, double spacing, double w) {
+    double tu = 0, tv = 0;
+    strips.inner(s, tu, tv);
+    const auto pieces = [&](double t, double half, int lo, int hi) {
+        if (t == 0) return 1;
+        const double m = strips.margin[std::size_t(t > 0 ? hi : lo)];
+        return std::clamp(int(std::ceil(spacing * 2 * half / m / std::min(g.hx, g.hy))), 1, 256);
+    };
+    const int nu = pieces(tu, strips.half_u, 0, 1), nv = pieces(tv, strips.half_v, 2, 3);
+    const double wp = w / double(nu * nv);
+    for (int b = 0; b < nv; ++b)
+        for (int a = 0; a < nu; ++a) {
+            const Vec3d sp{s.x + spacing * ((a + 0.5) / nu - 0.5) * (nu > 1), s.y + spacing * ((b + 0.5) / nv - 0.5) * (nv > 1), s.z};
+            const auto p = strip_landing(optics, strips, *strips.placement, sp);
+            if (p && p->x >= g.x0 && p->x < g.x0 + g.nx * g.hx && p->y >= g.y0 && p->y < g.y0 + g.ny * g.hy)
+                splat(placed, g, p->x, p->y, wp);
+        }
 }
 
 }  // namespace transport_detail
@@ -290,11 +421,25 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const RaySet rays = generate_rays(light, surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL));
     Eigen::ArrayXXd mu = Eigen::ArrayXXd::Zero(g.ny, g.nx);
     double lost = 0, total = 0;
+    // A lens's wall strips: their light is placed with the plain map (WallStrips).
+    WallStrips strips = options.strips;
+    if (!strips.placement) strips.margin = {};
+    const double spacing = std::sqrt(surface.size().x * surface.size().y / double(std::max<std::int64_t>(1, rays.size())));
+    Eigen::ArrayXXd placed = Eigen::ArrayXXd::Zero(g.ny, g.nx);
     for (std::int64_t k = 0; k < rays.size(); ++k) {
         const Vec3d o(rays.origin[std::size_t(k)]), d(rays.direction[std::size_t(k)]);
         const double w = double(rays.weight[std::size_t(k)]);
         total += w;
         const Vec3d s = o + d * (-o.z / d.z);
+        if (strips.any()) {
+            double tu = 0, tv = 0;
+            strips.inner(s, tu, tv);
+            if (tu != 0 || tv != 0) {
+                // A strip ray: its mirrored light is placed, not transported.
+                transport_detail::place_strip_ray(placed, g, optics, strips, s, spacing, w);
+                continue;
+            }
+        }
         const auto p = optics.flat_landing(s, d);
         if (!p) {
             lost += w;
@@ -305,8 +450,18 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     if (!(mu.sum() > 0))
         throw InputError("surface.initial: \"transport\": no light from the aperture reaches the receiver plane");
 
+    // The target less the strips' light: ν scaled to all the light, then what is placed taken off.
+    const double placed_sum = placed.sum();
+    const Eigen::ArrayXXd nu_rest =
+        placed_sum > 0 ? Eigen::ArrayXXd((nu * ((mu.sum() + placed_sum) / nu.sum()) - placed).max(0.0)) : nu;
+    if (!(nu_rest.sum() > 0)) throw InputError("target: the image is entirely black: there is nothing to send light to");
+
     TransportMap m;
-    m.ot = options.method == TransportMethod::morphing ? solve_morphing(g, mu, nu) : solve_grid_ot(g, mu, nu, options.ot);
+    m.ot = options.method == TransportMethod::morphing ? solve_morphing(g, mu, nu_rest)
+                                                       : solve_grid_ot(g, mu, nu_rest, options.ot);
+    m.strips = strips;
+    m.report.strip_margin = strips.widest();
+    m.report.strip_light = placed_sum > 0 ? placed_sum / (mu.sum() + placed_sum) : 0;
     m.report.cells_per_pixel = options.cells_per_pixel;
     m.report.grid_x = g.nx;
     m.report.grid_y = g.ny;
@@ -341,8 +496,19 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
         for (int i = 0; i < nx; ++i) {
             const std::size_t p = std::size_t(j * nx + i);
             const Vec3d s{hm.u_of(i), hm.v_of(j), 0};
-            const auto land = optics.flat_landing(s, optics.incoming(s));
             active_count += active[p];
+            if (map.strips.any()) {
+                double tu = 0, tv = 0;
+                map.strips.inner(s, tu, tv);
+                if (tu != 0 || tv != 0) {  // a wall strip's vertex aims beyond its inner edge's goal
+                    bool landed = false;
+                    goal[p] = transport_detail::strip_goal(optics, map.strips, map.ot, s, landed);
+                    mapped[p] = landed;
+                    unmapped += landed ? 0 : active[p];
+                    continue;
+                }
+            }
+            const auto land = optics.flat_landing(s, optics.incoming(s));
             if (!land) {
                 unmapped += active[p];
                 continue;
@@ -414,6 +580,101 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     hm.set_heights(heights);  // clamps to the bounds, computes the normals
     report.fit_seconds = std::chrono::duration<double>(clock::now() - t0).count();
     return hm;
+}
+
+// The wall strips a lens needs (WallStrips), measured on `plain`, a surface fitted to the
+// plain map `map` (solved without strips) on the mesh the design uses: for each wall, in
+// each line of vertices along it, the strip whose rays leave the glass beyond the wall
+// (exit point past it, interpolated between the last vertex that does and the first that
+// does not). The margin is the widest such strip, widened by a quarter and a mesh cell
+// (the interior then spreads a little wider to reach the receiver's edge from the strip's
+// inner edge, and drifts a little further) and rounded up to whole mesh cells. A mirror, or a lens whose light stays inside
+// its walls, needs none. `wall_fraction` receives the share of the active vertices whose
+// light the plain map sends into a wall.
+inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& map, const Heightmap& plain,
+                                      double& wall_fraction) {
+    WallStrips strips;
+    wall_fraction = 0;
+    const transport_detail::Optics optics(scene);
+    if (!optics.lens) return strips;
+    const double hu = 0.5 * scene.surface.size.x, hv = 0.5 * scene.surface.size.y;
+    strips.half_u = hu, strips.half_v = hv;
+    const int nx = plain.nx(), ny = plain.ny();
+    // Each active vertex's exit point (NaN: inactive or unmapped).
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::vector<Vec3d> exit(std::size_t(nx * ny), Vec3d{nan, nan, nan});
+    const auto cell_on = [&](int i, int j) { return i >= 0 && j >= 0 && i + 1 < nx && j + 1 < ny && plain.cell_active(i, j); };
+    int active = 0, beyond = 0;
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            if (!(cell_on(i - 1, j - 1) || cell_on(i, j - 1) || cell_on(i - 1, j) || cell_on(i, j))) continue;
+            const Vec3d s0{plain.u_of(i), plain.v_of(j), 0};
+            const auto land = optics.flat_landing(s0, optics.incoming(s0));
+            if (!land) continue;
+            const Vec2d q = map.ot.transport(land->x, land->y);
+            const std::size_t p = std::size_t(j * nx + i);
+            Vec3d g;
+            optics.glass_path(Vec3d{s0.x, s0.y, double(plain.heights()[p])}, optics.rc + q.x * optics.ru + q.y * optics.rv,
+                              g, exit[p]);
+            ++active;
+            beyond += std::abs(exit[p].x) > hu || std::abs(exit[p].y) > hv;
+        }
+    wall_fraction = active > 0 ? double(beyond) / active : 0;
+    // One wall: `at(line, k)` is the k-th vertex of a line walked from the wall inwards,
+    // `x(k)` its distance from the wall, `over(e)` how far an exit point lies beyond it.
+    const auto measure = [&](int wall, int lines, int depth, auto at, auto x, auto over) {
+        double margin = 0;
+        for (int l = 0; l < lines; ++l) {
+            double prev_over = 0, prev_x = 0;
+            bool seen = false;
+            for (int k = 0; k < depth; ++k) {
+                const Vec3d e = exit[at(l, k)];
+                if (std::isnan(e.x)) {
+                    if (seen) break;
+                    continue;
+                }
+                const double o = over(e), xk = x(k);
+                if (o <= 0) {
+                    if (seen) margin = std::max(margin, prev_x + (xk - prev_x) * prev_over / (prev_over - o));
+                    break;
+                }
+                seen = true, prev_over = o, prev_x = xk;
+            }
+        }
+        // Whole mesh cells, so that the strip's inner edge is a vertex: the interior's
+        // cells aim at the interior's map, the strip's at the walls.
+        const double cell = wall < 2 ? plain.du() : plain.dv();
+        if (margin > 0) strips.margin[std::size_t(wall)] = cell * std::ceil(margin / cell - 1e-6);
+    };
+    const auto idx = [nx](int i, int j) { return std::size_t(j * nx + i); };
+    measure(1, ny, nx, [&](int l, int k) { return idx(nx - 1 - k, l); }, [&](int k) { return hu - plain.u_of(nx - 1 - k); },
+            [&](Vec3d e) { return e.x - hu; });
+    measure(0, ny, nx, [&](int l, int k) { return idx(k, l); }, [&](int k) { return plain.u_of(k) + hu; },
+            [&](Vec3d e) { return -hu - e.x; });
+    measure(3, nx, ny, [&](int l, int k) { return idx(l, ny - 1 - k); }, [&](int k) { return hv - plain.v_of(ny - 1 - k); },
+            [&](Vec3d e) { return e.y - hv; });
+    measure(2, nx, ny, [&](int l, int k) { return idx(l, k); }, [&](int k) { return plain.v_of(k) + hv; },
+            [&](Vec3d e) { return -hv - e.y; });
+    if (strips.any()) {
+        strips.placement = std::make_shared<const OtResult>(map.ot);
+        strips.placement_surface = std::make_shared<const Heightmap>(plain);
+    }
+    return strips;
+}
+
+// The wall strips of a lens design's start: the plain map solved with `options` (its
+// grid; no strips), fitted on `initial`'s mesh and measured (measure_wall_strips); the
+// plain map then places the strips' light. Mirrors return at once with none.
+inline WallStrips lens_wall_strips(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
+                                   std::uint64_t seed, const TransportOptions& options, double& wall_fraction) {
+    wall_fraction = 0;
+    if (!std::holds_alternative<Lens>(scene.surface.material)) return {};
+    TransportOptions plain_options = options;
+    plain_options.strips = {};
+    const TransportMap plain = solve_transport(scene, initial, target_image, seed, plain_options);
+    TransportReport report = plain.report;
+    const Heightmap fitted = surface_from_transport(scene, plain, initial.nx(), initial.ny(), report, plain_options);
+    return measure_wall_strips(scene, plain, fitted, wall_fraction);
 }
 
 }  // namespace freeform
