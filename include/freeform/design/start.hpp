@@ -118,8 +118,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
     TransportOptions strip_options;
     strip_options.ot.threads = threads;
     strip_options.cells_per_pixel = start_grid_cells_per_pixel.back();
-    double wall_fraction = 0;
-    const WallStrips strips = lens_wall_strips(scene, initial, target_image, seed, strip_options, wall_fraction);
+    const WallStrips strips = lens_wall_strips(scene, initial, target_image, seed, strip_options);
     OtGrid tried{};
     for (const double cells_per_pixel : start_grid_cells_per_pixel) {
         TransportOptions options;
@@ -132,7 +131,6 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
         TransportMap map = solve_transport(scene, initial, target_image, seed, options);
         TransportReport fitted = map.report;
         Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
-        fitted.wall_fraction = wall_fraction;
         map.report = fitted;
         const SurfaceEvaluation eval = evaluate_surface(scene, surface, target_image, seed, threads);
         if (!best) {

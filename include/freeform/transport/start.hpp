@@ -52,7 +52,7 @@ namespace freeform {
 // So the start uses them (docs/architecture.md §4b): the map carries the light of the
 // interior (the face less a strip along each such wall) onto the target, the interior's
 // edge reaching the receiver's edge; the strip's rays are aimed further out, up to the
-// lens's width beyond the map's goal at the wall (strip_goal), so that they meet the wall
+// lens's width beyond the map's goal at the wall (transport_detail::aim), so that they meet the wall
 // and are mirrored into a band across the receiver. Aimed that way the strip continues the
 // interior's convex potential (a monotone map, no fold and no caustic), and where its
 // mirrored light lands is known: the map is solved for the target less that light.
@@ -60,6 +60,7 @@ namespace freeform {
 struct WallStrips {
     std::array<double, 4> margin{};
     double half_u = 0, half_v = 0;  // the lens body's half extents
+    double wall_fraction = 0;       // share of the active vertices the plain map sent into a wall
     // The map that places the strips' mirrored light when the start's map is solved (the
     // plain map of lens_wall_strips); unset: the strips' light is not subtracted.
     std::shared_ptr<const OtResult> placement;
@@ -68,17 +69,17 @@ struct WallStrips {
     bool any() const { return margin[0] > 0 || margin[1] > 0 || margin[2] > 0 || margin[3] > 0; }
     double widest() const { return std::max({margin[0], margin[1], margin[2], margin[3]}); }
 
-    // The strip's inner edge nearest to the surface point s, and how far into the strip s
-    // lies along each axis (−1 at the −u or −v wall, 1 at the +u or +v wall, 0 inside).
-    Vec3d inner(Vec3d s, double& tu, double& tv) const {
-        const auto axis = [&](double x, double half, int lo, int hi, double& t) {
+    // How far into a strip the surface point s lies along each axis (−1 at the −u or −v
+    // wall, 1 at the +u or +v wall, 0 outside the strips); true when it lies in one.
+    bool depth(Vec3d s, double& tu, double& tv) const {
+        const auto axis = [&](double x, double half, int lo, int hi) {
             const double mlo = margin[std::size_t(lo)], mhi = margin[std::size_t(hi)];
-            t = 0;
-            if (mhi > 0 && x > half - mhi) return t = std::min(1.0, (x - (half - mhi)) / mhi), half - mhi;
-            if (mlo > 0 && x < -half + mlo) return t = -std::min(1.0, (-half + mlo - x) / mlo), -half + mlo;
-            return x;
+            if (mhi > 0 && x > half - mhi) return std::min(1.0, (x - (half - mhi)) / mhi);
+            if (mlo > 0 && x < -half + mlo) return -std::min(1.0, (-half + mlo - x) / mlo);
+            return 0.0;
         };
-        return {axis(s.x, half_u, 0, 1, tu), axis(s.y, half_v, 2, 3, tv), s.z};
+        tu = axis(s.x, half_u, 0, 1), tv = axis(s.y, half_v, 2, 3);
+        return tu != 0 || tv != 0;
     }
 };
 
@@ -120,8 +121,9 @@ struct TransportReport {
     // one's cells per pixel and its start's error under the exact tracer (−1: none tried).
     double other_cells_per_pixel = 0, other_error = -1;
     // A lens's wall strips (WallStrips): the widest strip (metres; 0: none), the share of
-    // the vertices whose light the plain map sent into a side wall, and the share of the
-    // light the strips mirror onto the receiver (the target less it is what the map carries).
+    // the vertices whose light the plain map sent into a side wall (WallStrips::
+    // wall_fraction), and the share of the light the strips mirror onto the receiver (the
+    // target less it is what the map carries).
     double strip_margin = 0, wall_fraction = 0, strip_light = 0;
 };
 
@@ -251,6 +253,25 @@ inline void splat(Eigen::ArrayXXd& m, const OtGrid& g, double x, double y, doubl
     m(j + 1, i + 1) += w * a * b;
 }
 
+// The right-hand side of the least-squares height fit: minus the divergence of the edge
+// slopes, each edge's slope the mean of its ends' (su, sv: vertex slopes along u and v).
+inline Eigen::ArrayXXd edge_slope_divergence(const Eigen::ArrayXXd& su, const Eigen::ArrayXXd& sv, double du, double dv) {
+    const Eigen::Index ny = su.rows(), nx = su.cols();
+    Eigen::ArrayXXd rhs = Eigen::ArrayXXd::Zero(ny, nx);
+    for (Eigen::Index j = 0; j < ny; ++j)
+        for (Eigen::Index i = 0; i < nx; ++i) {
+            if (i + 1 < nx) {
+                const double e = 0.5 * (su(j, i) + su(j, i + 1)) / du;
+                rhs(j, i) -= e, rhs(j, i + 1) += e;
+            }
+            if (j + 1 < ny) {
+                const double e = 0.5 * (sv(j, i) + sv(j + 1, i)) / dv;
+                rhs(j, i) -= e, rhs(j + 1, i) += e;
+            }
+        }
+    return rhs;
+}
+
 // The height of `hm` at (u, v) (surface frame), bilinear between its vertices, clamped to
 // the grid.
 inline double height_at(const Heightmap& hm, double u, double v) {
@@ -262,35 +283,50 @@ inline double height_at(const Heightmap& hm, double u, double v) {
     return (1 - b) * ((1 - a) * h(i, j) + a * h(i + 1, j)) + b * ((1 - a) * h(i, j + 1) + a * h(i + 1, j + 1));
 }
 
-// Where the rays of a wall strip aim (WallStrips): the map's own goal for s (the map
-// extends past the interior, smoothly), moved outwards along the receiver plane by the
-// lens's width along that axis times the square of how far into the strip s lies. The
-// square keeps the aim's slope continuous at the strip's inner edge: a kink there bends
-// the vertex normals of the interior's last cells (central differences) and starves the
-// receiver's edge. Surface frame.
-inline Vec3d strip_goal(const Optics& optics, const WallStrips& strips, const OtResult& map, Vec3d s, bool& landed) {
-    double tu = 0, tv = 0;
-    strips.inner(s, tu, tv);
+// The vertices of `hm`'s active cells (1: a corner of an active cell).
+inline std::vector<std::uint8_t> active_vertices(const Heightmap& hm) {
+    const int nx = hm.nx(), ny = hm.ny();
+    std::vector<std::uint8_t> active(std::size_t(nx * ny), 0);
+    for (int j = 0; j + 1 < ny; ++j)
+        for (int i = 0; i + 1 < nx; ++i)
+            if (hm.cell_active(i, j))
+                for (int b = 0; b < 2; ++b)
+                    for (int a = 0; a < 2; ++a) active[std::size_t((j + b) * nx + i + a)] = 1;
+    return active;
+}
+
+// Where the light entering the flat surface at s is sent (surface frame, a point of the
+// receiver plane): the map's goal for its flat landing. In a wall strip (WallStrips) the
+// goal moves outwards along the receiver plane by the lens's width along that axis times
+// the square of how far into the strip s lies: the square keeps the aim's slope
+// continuous at the strip's inner edge (a kink there bends the central-difference normals
+// of the interior's last cells and starves the receiver's edge), and the map, which
+// extends smoothly past the interior, carries it on. Nothing when the flat landing misses
+// the receiver plane.
+inline std::optional<Vec3d> aim(const Optics& optics, const WallStrips& strips, const OtResult& map, Vec3d s) {
     const auto land = optics.flat_landing(s, optics.incoming(s));
-    landed = land.has_value();
-    if (!landed) return {};
+    if (!land) return std::nullopt;
     const Vec2d q = map.transport(land->x, land->y);
-    const auto along = [&](Vec3d axis) { return normalize(axis - dot(axis, optics.rn) * optics.rn); };
-    return optics.rc + q.x * optics.ru + q.y * optics.rv + (2 * strips.half_u * tu * std::abs(tu)) * along(Vec3d{1, 0, 0}) +
-           (2 * strips.half_v * tv * std::abs(tv)) * along(Vec3d{0, 1, 0});
+    Vec3d goal = optics.rc + q.x * optics.ru + q.y * optics.rv;
+    double tu = 0, tv = 0;
+    if (strips.depth(s, tu, tv)) {
+        const auto along = [&](Vec3d axis) { return normalize(axis - dot(axis, optics.rn) * optics.rn); };
+        goal = goal + (2 * strips.half_u * tu * std::abs(tu)) * along(Vec3d{1, 0, 0}) +
+               (2 * strips.half_v * tv * std::abs(tv)) * along(Vec3d{0, 1, 0});
+    }
+    return goal;
 }
 
 // Where the light of a strip ray entering at s (flat surface) lands, in receiver-local
 // metres: its path through the glass to the strip goal under `map`, mirrored by each wall
 // its exit lies beyond. Nothing when it misses the receiver plane.
 inline std::optional<Vec2d> strip_landing(const Optics& optics, const WallStrips& strips, const OtResult& map, Vec3d s) {
-    bool landed = false;
-    const Vec3d goal = strip_goal(optics, strips, map, s, landed);
-    if (!landed) return std::nullopt;
+    const auto goal = aim(optics, strips, map, s);
+    if (!goal) return std::nullopt;
     Vec3d g, e;
     optics.glass_path(Vec3d{s.x, s.y, strips.placement_surface ? height_at(*strips.placement_surface, s.x, s.y) : 0.0},
-                      goal, g, e);
-    Vec3d out = normalize(goal - e);
+                      *goal, g, e);
+    Vec3d out = normalize(*goal - e);
     if (std::abs(e.x) > strips.half_u) e.x = std::copysign(2 * strips.half_u, e.x) - e.x, out.x = -out.x;
     if (std::abs(e.y) > strips.half_v) e.y = std::copysign(2 * strips.half_v, e.y) - e.y, out.y = -out.y;
     const double dn = dot(out, optics.rn);
@@ -310,7 +346,7 @@ inline std::optional<Vec2d> strip_landing(const Optics& optics, const WallStrips
 inline void place_strip_ray(Eigen::ArrayXXd& placed, const OtGrid& g, const Optics& optics, const WallStrips& strips,
                             Vec3d s, double spacing, double w) {
     double tu = 0, tv = 0;
-    strips.inner(s, tu, tv);
+    strips.depth(s, tu, tv);
     const auto pieces = [&](double t, double half, int lo, int hi) {
         if (t == 0) return 1;
         const double m = strips.margin[std::size_t(t > 0 ? hi : lo)];
@@ -431,14 +467,11 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
         const double w = double(rays.weight[std::size_t(k)]);
         total += w;
         const Vec3d s = o + d * (-o.z / d.z);
-        if (strips.any()) {
-            double tu = 0, tv = 0;
-            strips.inner(s, tu, tv);
-            if (tu != 0 || tv != 0) {
-                // A strip ray: its mirrored light is placed, not transported.
-                transport_detail::place_strip_ray(placed, g, optics, strips, s, spacing, w);
-                continue;
-            }
+        double tu = 0, tv = 0;
+        if (strips.any() && strips.depth(s, tu, tv)) {
+            // A strip ray: its mirrored light is placed, not transported.
+            transport_detail::place_strip_ray(placed, g, optics, strips, s, spacing, w);
+            continue;
         }
         const auto p = optics.flat_landing(s, d);
         if (!p) {
@@ -461,6 +494,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
                                                        : solve_grid_ot(g, mu, nu_rest, options.ot);
     m.strips = strips;
     m.report.strip_margin = strips.widest();
+    m.report.wall_fraction = options.strips.wall_fraction;
     m.report.strip_light = placed_sum > 0 ? placed_sum / (mu.sum() + placed_sum) : 0;
     m.report.cells_per_pixel = options.cells_per_pixel;
     m.report.grid_x = g.nx;
@@ -485,37 +519,16 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     const int n = nx * ny;
     // Where each vertex must send its light (surface frame), from its flat landing point.
     std::vector<Vec3d> goal(static_cast<std::size_t>(n));
-    std::vector<std::uint8_t> active(std::size_t(n), 0), mapped(std::size_t(n), 0);
-    for (int j = 0; j + 1 < ny; ++j)
-        for (int i = 0; i + 1 < nx; ++i)
-            if (hm.cell_active(i, j))
-                for (int b = 0; b < 2; ++b)
-                    for (int a = 0; a < 2; ++a) active[std::size_t((j + b) * nx + i + a)] = 1;
+    std::vector<std::uint8_t> mapped(std::size_t(n), 0);
+    const std::vector<std::uint8_t> active = transport_detail::active_vertices(hm);
     int unmapped = 0, active_count = 0;
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
             const std::size_t p = std::size_t(j * nx + i);
-            const Vec3d s{hm.u_of(i), hm.v_of(j), 0};
             active_count += active[p];
-            if (map.strips.any()) {
-                double tu = 0, tv = 0;
-                map.strips.inner(s, tu, tv);
-                if (tu != 0 || tv != 0) {  // a wall strip's vertex aims beyond its inner edge's goal
-                    bool landed = false;
-                    goal[p] = transport_detail::strip_goal(optics, map.strips, map.ot, s, landed);
-                    mapped[p] = landed;
-                    unmapped += landed ? 0 : active[p];
-                    continue;
-                }
-            }
-            const auto land = optics.flat_landing(s, optics.incoming(s));
-            if (!land) {
-                unmapped += active[p];
-                continue;
-            }
-            const Vec2d q = map.ot.transport(land->x, land->y);
-            goal[p] = optics.rc + q.x * optics.ru + q.y * optics.rv;
-            mapped[p] = 1;
+            const auto g = transport_detail::aim(optics, map.strips, map.ot, Vec3d{hm.u_of(i), hm.v_of(j), 0});
+            if (g) goal[p] = *g, mapped[p] = 1;
+            else unmapped += active[p];
         }
     report.unmapped_fraction = active_count > 0 ? double(unmapped) / active_count : 0;
 
@@ -544,20 +557,7 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
                 su(j, i) = -nn.x / nz;
                 sv(j, i) = -nn.y / nz;
             }
-        // Right-hand side: minus the divergence of the edge slopes.
-        Eigen::ArrayXXd rhs = Eigen::ArrayXXd::Zero(ny, nx);
-        for (int j = 0; j < ny; ++j)
-            for (int i = 0; i < nx; ++i) {
-                if (i + 1 < nx) {
-                    const double e = 0.5 * (su(j, i) + su(j, i + 1)) / du;
-                    rhs(j, i) -= e, rhs(j, i + 1) += e;
-                }
-                if (j + 1 < ny) {
-                    const double e = 0.5 * (sv(j, i) + sv(j + 1, i)) / dv;
-                    rhs(j, i) -= e, rhs(j + 1, i) += e;
-                }
-            }
-        Eigen::ArrayXXd sol = poisson.solve(rhs);
+        Eigen::ArrayXXd sol = poisson.solve(transport_detail::edge_slope_divergence(su, sv, du, dv));
         if (!sol.allFinite()) sol.setZero();
         // Into the bounds: centre the active range in them.
         double lo = 1e300, hi = -1e300;
@@ -586,15 +586,10 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
 // plain map `map` (solved without strips) on the mesh the design uses: for each wall, in
 // each line of vertices along it, the strip whose rays leave the glass beyond the wall
 // (exit point past it, interpolated between the last vertex that does and the first that
-// does not). The margin is the widest such strip, widened by a quarter and a mesh cell
-// (the interior then spreads a little wider to reach the receiver's edge from the strip's
-// inner edge, and drifts a little further) and rounded up to whole mesh cells. A mirror, or a lens whose light stays inside
-// its walls, needs none. `wall_fraction` receives the share of the active vertices whose
-// light the plain map sends into a wall.
-inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& map, const Heightmap& plain,
-                                      double& wall_fraction) {
+// does not). The margin is the widest such strip, rounded up to whole mesh cells. A
+// mirror, or a lens whose light stays inside its walls, needs none.
+inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& map, const Heightmap& plain) {
     WallStrips strips;
-    wall_fraction = 0;
     const transport_detail::Optics optics(scene);
     if (!optics.lens) return strips;
     const double hu = 0.5 * scene.surface.size.x, hv = 0.5 * scene.surface.size.y;
@@ -603,23 +598,20 @@ inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& ma
     // Each active vertex's exit point (NaN: inactive or unmapped).
     const double nan = std::numeric_limits<double>::quiet_NaN();
     std::vector<Vec3d> exit(std::size_t(nx * ny), Vec3d{nan, nan, nan});
-    const auto cell_on = [&](int i, int j) { return i >= 0 && j >= 0 && i + 1 < nx && j + 1 < ny && plain.cell_active(i, j); };
-    int active = 0, beyond = 0;
+    const std::vector<std::uint8_t> active = transport_detail::active_vertices(plain);
+    int counted = 0, beyond = 0;
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
-            if (!(cell_on(i - 1, j - 1) || cell_on(i, j - 1) || cell_on(i - 1, j) || cell_on(i, j))) continue;
-            const Vec3d s0{plain.u_of(i), plain.v_of(j), 0};
-            const auto land = optics.flat_landing(s0, optics.incoming(s0));
-            if (!land) continue;
-            const Vec2d q = map.ot.transport(land->x, land->y);
             const std::size_t p = std::size_t(j * nx + i);
+            const auto goal = active[p] ? transport_detail::aim(optics, map.strips, map.ot, Vec3d{plain.u_of(i), plain.v_of(j), 0})
+                                        : std::nullopt;
+            if (!goal) continue;
             Vec3d g;
-            optics.glass_path(Vec3d{s0.x, s0.y, double(plain.heights()[p])}, optics.rc + q.x * optics.ru + q.y * optics.rv,
-                              g, exit[p]);
-            ++active;
+            optics.glass_path(Vec3d{plain.u_of(i), plain.v_of(j), double(plain.heights()[p])}, *goal, g, exit[p]);
+            ++counted;
             beyond += std::abs(exit[p].x) > hu || std::abs(exit[p].y) > hv;
         }
-    wall_fraction = active > 0 ? double(beyond) / active : 0;
+    strips.wall_fraction = counted > 0 ? double(beyond) / counted : 0;
     // One wall: `at(line, k)` is the k-th vertex of a line walked from the wall inwards,
     // `x(k)` its distance from the wall, `over(e)` how far an exit point lies beyond it.
     const auto measure = [&](int wall, int lines, int depth, auto at, auto x, auto over) {
@@ -666,15 +658,14 @@ inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& ma
 // grid; no strips), fitted on `initial`'s mesh and measured (measure_wall_strips); the
 // plain map then places the strips' light. Mirrors return at once with none.
 inline WallStrips lens_wall_strips(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
-                                   std::uint64_t seed, const TransportOptions& options, double& wall_fraction) {
-    wall_fraction = 0;
+                                   std::uint64_t seed, const TransportOptions& options) {
     if (!std::holds_alternative<Lens>(scene.surface.material)) return {};
     TransportOptions plain_options = options;
     plain_options.strips = {};
     const TransportMap plain = solve_transport(scene, initial, target_image, seed, plain_options);
     TransportReport report = plain.report;
     const Heightmap fitted = surface_from_transport(scene, plain, initial.nx(), initial.ny(), report, plain_options);
-    return measure_wall_strips(scene, plain, fitted, wall_fraction);
+    return measure_wall_strips(scene, plain, fitted);
 }
 
 }  // namespace freeform
