@@ -108,26 +108,27 @@ struct TransportStart {
 // The transport start of `initial`'s mesh on each grid of start_grid_cells_per_pixel (a
 // grid that max_grid makes equal to the one before is not solved twice), the better one
 // under the exact tracer, with the same rays for both: the choice depends on the scene
-// alone. An InputError on the first grid (no light reaches the receiver) propagates.
+// alone. A lens whose plain map sends light into its side walls is also started with wall
+// strips (WallStrips, measured once on the cheaper grid) on each grid, and the exact
+// tracer judges those starts with the plain ones: the strips remove the cross the walls
+// throw, but their mirrored light lands where the target may be black (a letter), and
+// there the plain start can be the better one. An InputError on the first grid (no light
+// reaches the receiver) propagates.
 inline TransportStart best_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                            std::uint64_t seed, int threads) {
     std::optional<TransportStart> best;
     const FlatFootprint fp = flat_footprint(scene, initial);
-    // A lens whose light would drift into its side walls aims the strips next to them at
-    // the walls (WallStrips), measured once on the cheaper grid.
     TransportOptions strip_options;
     strip_options.ot.threads = threads;
     strip_options.cells_per_pixel = start_grid_cells_per_pixel.back();
     const WallStrips strips = lens_wall_strips(scene, initial, target_image, seed, strip_options);
-    OtGrid tried{};
-    for (const double cells_per_pixel : start_grid_cells_per_pixel) {
+    WallStrips plain = strips;  // no strips, the measurement kept for the report
+    plain.margin = {};
+    const auto candidate = [&](double cells_per_pixel, const WallStrips& walls) {
         TransportOptions options;
         options.ot.threads = threads;
         options.cells_per_pixel = cells_per_pixel;
-        options.strips = strips;
-        const OtGrid g = transport_grid(scene, fp, options);
-        if (g.nx == tried.nx && g.ny == tried.ny && g.hx == tried.hx) continue;
-        tried = g;
+        options.strips = walls;
         TransportMap map = solve_transport(scene, initial, target_image, seed, options);
         TransportReport fitted = map.report;
         Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
@@ -143,6 +144,16 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
             best->map.report.other_cells_per_pixel = cells_per_pixel;
             best->map.report.other_error = eval.error;
         }
+    };
+    OtGrid tried{};
+    for (const double cells_per_pixel : start_grid_cells_per_pixel) {
+        TransportOptions options;
+        options.cells_per_pixel = cells_per_pixel;
+        const OtGrid g = transport_grid(scene, fp, options);
+        if (g.nx == tried.nx && g.ny == tried.ny && g.hx == tried.hx) continue;
+        tried = g;
+        candidate(cells_per_pixel, plain);
+        if (strips.any()) candidate(cells_per_pixel, strips);
     }
     return std::move(*best);
 }
