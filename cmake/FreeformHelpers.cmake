@@ -1,6 +1,7 @@
 # Helpers that give every test, example and benchmark of the project the same setup:
-# the library (and freeform::embree when it exists), warnings (errors with FREEFORM_WERROR)
-# and a common output place. Only the project's own targets use them; nothing here is installed.
+# the library (and freeform::embree / freeform::step when they exist), warnings (errors
+# with FREEFORM_WERROR) and a common output place. Only the project's own targets use
+# them; nothing here is installed.
 include_guard(GLOBAL)
 
 # Settings shared by all of the project's executables.
@@ -8,6 +9,9 @@ function(_freeform_setup_executable target)
   target_link_libraries(${target} PRIVATE freeform::freeform $<BUILD_INTERFACE:freeform_warnings>)
   if(TARGET freeform::embree)
     target_link_libraries(${target} PRIVATE freeform::embree)
+  endif()
+  if(TARGET freeform::step)
+    target_link_libraries(${target} PRIVATE freeform::step)
   endif()
 endfunction()
 

@@ -12,6 +12,7 @@ packages=(
     libeigen3-dev libembree-dev doctest-dev libstb-dev libcli11-dev nlohmann-json3-dev
     libbenchmark-dev libomp-dev
     libopenmpi-dev openmpi-bin
+    libocct-data-exchange-dev libocct-modeling-algorithms-dev libocct-modeling-data-dev libocct-foundation-dev
     fonts-dejavu-core python3 python3-matplotlib
 )
 for arg in "$@"; do

@@ -122,6 +122,14 @@ TEST_CASE("the automatic level keeps the exported mesh within its triangle budge
     CHECK(f.subdivisions == 5);
     CHECK(f.mesh.triangles.size() <= 20'000u);
     CHECK(f.normal_error > f.normal_tolerance);  // the budget, not the tolerance, set k
+    CHECK_FALSE(f.tolerance_met);                // and the fabrication says so
+    // With room enough the same surface gets the k its tolerance asks for, and meets it.
+    s.optimise.export_tolerance = 10;  // the loosest the scene allows: 20 mrad here
+    s.optimise.export_max_triangles = 1'000'000;
+    const Fabrication roomy = make_fabrication(s, curved);
+    CHECK(roomy.tolerance_met);
+    CHECK(roomy.normal_error <= roomy.normal_tolerance);
+    CHECK(roomy.subdivisions < 16);
 }
 
 #if defined(FREEFORM_WITH_EMBREE)

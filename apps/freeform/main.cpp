@@ -1,8 +1,9 @@
-// The `freeform` command line: render a scene, or design its surface.
+// The `freeform` command line: render a scene, design its surface, or export a surface.
 //
 //   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj [--material refractive:N] [--mesh-normals]]
 //                   [--tracer T] [--threads N]
 //   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
+//   freeform export SCENE.json --heightmap H.pfm --format step|sag|stl|obj --out FILE [--no-check]
 //
 // Built with MPI (CMake finds it) the same source also makes `freeform_mpi`: run under
 // `mpirun -np N freeform_mpi design ...` it designs by replica exchange, one replica per
@@ -22,6 +23,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <optional>
@@ -235,7 +237,7 @@ constexpr std::initializer_list<const char*> render_outputs = {"irradiance.pfm",
                                                               "metrics.json"};
 constexpr std::initializer_list<const char*> design_outputs = {
     "metrics.json",   "convergence.csv", "heightmap.pfm", "irradiance.pfm", "irradiance.png",
-    "target.png",     "comparison.png",  "surface.obj",   "surface.stl"};
+    "target.png",     "comparison.png",  "surface.obj",   "surface.stl",    "surface.step", "surface.dat"};
 
 // ---------------------------------------------------------------------------- render
 
@@ -452,39 +454,95 @@ RankLayout rank_layout(int threads) {
 
 // A design's files. Every file is staged and moved into place together, metrics.json
 // last (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside
-// a partial result, and a failed write leaves the previous results as they were.
-void write_design_outputs(const fs::path& out, const json& m, const std::string& csv, const Heightmap& surface,
-                          const ImageD& irradiance, const ImageD& target_img, const TriangleMesh& fab) {
+// a partial result, and a failed write leaves the previous results as they were. The
+// smooth forms (surface.step, surface.dat) are read back from the staging folder and
+// judged before metrics.json is written: their figures go into export.forms.
+void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d, const ImageD& irradiance,
+                          const ImageD& target_img, const ImageD& target, const std::vector<ExportFormat>& formats,
+                          const std::function<void(const std::string&)>& phase) {
     io::StagedOutput staged(out);
-    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, csv); });
-    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, surface); });
+    const TriangleMesh& fab = d.exported.fabrication.mesh;
+    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, io::convergence_csv(d.result)); });
+    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, d.result.surface); });
     staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
     staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
     staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
     staged.write("comparison.png",
                  [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
-    staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
-    staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
+    for (const ExportFormat format : formats) {
+        if (format == ExportFormat::mesh) {
+            staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
+            staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
+            continue;
+        }
+        const char* name = format == ExportFormat::step ? "surface.step" : "surface.dat";
+        phase(std::string("writing ") + name + ", reading it back and tracing it");
+        staged.write(name, [&](const fs::path& f) {
+            const io::FormCheck fc = io::write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline,
+                                                              &target, d.scene.optimise.threads);
+            m["export"]["forms"][std::string(to_string(format))] = io::form_json(fc);
+        });
+    }
+    json formats_json = json::array();
+    for (const ExportFormat format : formats) formats_json.push_back(std::string(to_string(format)));
+    m["export"]["formats"] = formats_json;
     staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
     staged.commit("metrics.json");
+}
+
+// One form's figure for the summary: "0.0358" and how it was traced.
+std::string form_figure(const json& forms, const std::string& name) {
+    if (!forms.contains(name) || forms[name]["error_physical"].is_null()) return "not traced";
+    return fixed(forms[name]["error_physical"].get<double>(), 4);
+}
+
+// The summary's lines on the exported forms, the scene's first format leading.
+void print_forms(const CompletedDesign& d, const json& m) {
+    const json& exported = m["export"];
+    const json& forms = exported["forms"];
+    const Fabrication& fab = d.exported.fabrication;
+    const std::optional<CellMeans>& cells = d.exported.cells;
+    bool first = true;
+    for (const json& f : exported["formats"]) {
+        const std::string name = f.get<std::string>();
+        std::printf("  %s ", first ? "error_physical" : "        also:");
+        if (name == "mesh" && cells) {
+            std::printf("%.4f, energy %.4f: surface.obj/.stl (%zu flat triangles) traced, %.0f rays per cell\n",
+                        cells->error, cells->totals.energy(), fab.mesh.triangles.size(), cells->rays_per_cell);
+        } else if (name == "mesh") {
+            std::printf("not traced (a build without Embree): surface.obj/.stl, %zu triangles\n",
+                        fab.mesh.triangles.size());
+        } else {
+            const json& fj = forms[name];
+            std::printf("%s: %s (%.1f MB, valid: %s) read back and traced with its own normals\n",
+                        form_figure(forms, name).c_str(), fj["file"].get<std::string>().c_str(),
+                        double(fj["bytes"].get<std::uintmax_t>()) / 1e6, fj["valid"].get<std::string>().c_str());
+        }
+        first = false;
+    }
+    if (forms.contains("designed"))
+        std::printf("  the designed surface itself (heightmap.pfm): %s\n", form_figure(forms, "designed").c_str());
+    if (!fab.tolerance_met)
+        std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at k = %d%s; "
+                    "surface.step / surface.dat keep the designed surface\n",
+                    fab.normal_error * 1e3, fab.normal_tolerance * 1e3, fab.subdivisions,
+                    fab.automatic ? (" (optimise.export_max_triangles = " +
+                                     std::to_string(d.scene.optimise.export_max_triangles) + " allows no more)")
+                                        .c_str()
+                                  : " (optimise.export_subdivisions)");
 }
 
 // The summary a design prints (always, --quiet or not): error_physical first, then the
 // diagnostics, the machining figures, the start and where the results are.
 void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out) {
     const DesignResult& result = d.result;
-    const std::optional<CellMeans>& cells = d.exported.cells;
-    const std::size_t triangles = d.exported.fabrication.mesh.triangles.size();
     const double error = d.fitted.error, energy = d.fitted.totals.energy();
     const std::optional<double>& error_held_out = d.error_held_out;
     const std::optional<double>& error_exported = d.exported.error_exported;
     std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
                 (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                 result.stopped_early ? " -- best result so far written" : "");
-    if (cells)
-        std::printf("  error_physical %.4f, energy %.4f: cell means of the exported mesh (%zu triangles) traced as "
-                    "flat triangles, %.0f rays per cell\n",
-                    cells->error, cells->totals.energy(), triangles, cells->rays_per_cell);
+    print_forms(d, m);
     std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
     if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
     if (error_exported) std::printf("; exported mesh with the design's rays %.4f", *error_exported);
@@ -510,8 +568,13 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                     (st.transport.height_range - st.transport.height_excess) * 1e3);
     if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
     std::printf("\n");
-    std::printf("  results in %s/ (metrics.json, comparison.png, surface.obj/.stl, heightmap.pfm)\n",
-                out.string().c_str());
+    std::string files;
+    for (const json& f : m["export"]["formats"]) {
+        const std::string name = f.get<std::string>();
+        files += name == "mesh" ? ", surface.obj/.stl" : name == "step" ? ", surface.step" : ", surface.dat";
+    }
+    std::printf("  results in %s/ (metrics.json, comparison.png%s, heightmap.pfm)\n", out.string().c_str(),
+                files.c_str());
 }
 
 // metrics.json's "replicas" block: how the MPI ranks shared the design.
@@ -610,6 +673,7 @@ int run_design(const DesignArgs& a) {
     check_output_dir(a.out, design_outputs);
     check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits);
     const ImageD target = io::load_target_image(scene, limits);
+    const std::vector<ExportFormat> formats = io::export_formats(scene);  // a format this build lacks: exit 2 now
     PlannedDesign plan = plan_design(scene, io::load_start_surface(scene, limits));
 
     std::signal(SIGINT, on_sigint);
@@ -689,8 +753,9 @@ int run_design(const DesignArgs& a) {
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
     if (!quiet) status.show("writing the results");
-    write_design_outputs(a.out, m, io::convergence_csv(d.result), d.result.surface, irradiance, target_img,
-                         d.exported.fabrication.mesh);
+    write_design_outputs(a.out, m, d, irradiance, target_img, target, formats, [&](const std::string& what) {
+        if (!quiet) status.show(what);
+    });
     status.finish();
     print_design_summary(d, m, a.out);
     std::signal(SIGINT, SIG_DFL);
@@ -722,11 +787,91 @@ std::string one_line(const std::string& message) {
     return out;
 }
 
+// ---------------------------------------------------------------------------- export
+struct ExportArgs {
+    fs::path scene, heightmap, out;
+    std::string format;
+    int threads = 0;
+    bool no_check = false;
+    std::vector<std::string> limits;  // --limit NAME=VALUE
+};
+
+enum class ExportFile { step, sag, stl, obj };
+
+ExportFile parse_export_format(const std::string& f) {
+    if (f == "step") return ExportFile::step;
+    if (f == "sag") return ExportFile::sag;
+    if (f == "stl") return ExportFile::stl;
+    if (f == "obj") return ExportFile::obj;
+    throw InputError("--format: expected step, sag, stl or obj, got '" + f + "'");
+}
+
+// The exported facets of `hm` (stl/obj), written, and judged when `target` is given.
+void export_mesh(const ExportArgs& a, ExportFile kind, const Scene& scene, const Heightmap& hm,
+                 const std::optional<ImageD>& target) {
+    const Fabrication fab = make_fabrication(scene, hm);
+    if (kind == ExportFile::stl)
+        io::write_stl(a.out, fab.mesh);
+    else
+        io::write_obj(a.out, fab.mesh);
+    std::printf("wrote %s: %zu triangles, %d x %d facet pairs per cell, facet normal error %.3f mrad (90th "
+                "percentile) against a tolerance of %.3f mrad%s\n",
+                a.out.string().c_str(), fab.mesh.triangles.size(), fab.subdivisions, fab.subdivisions,
+                fab.normal_error * 1e3, fab.normal_tolerance * 1e3,
+                fab.tolerance_met ? "" : ": MISSED within optimise.export_max_triangles");
+#if defined(FREEFORM_WITH_EMBREE)
+    if (!target) return;
+    const CellMeans c = exported_cell_means(exec::omp_t{a.threads}, scene, hm, exported_geometry(scene, hm, fab),
+                                            &*target, physical_cell_mean_options(scene.optimise.seed));
+    std::printf("  error_physical %.4f: the facets traced as flat triangles, %.0f rays per cell\n", c.error,
+                c.rays_per_cell);
+#endif
+}
+
+// `freeform export`: a height map's surface in one of the exported forms, without designing.
+int run_export(const ExportArgs& a) {
+    const Limits limits = parse_limits(a.limits);
+    const ExportFile kind = parse_export_format(a.format);
+    Scene scene = io::load_scene(a.scene, limits);
+    scene.optimise.threads = a.threads;
+    const Heightmap hm = io::read_heightmap(scene, a.heightmap, limits);
+    std::error_code ec;
+    if (fs::is_directory(a.out, ec)) throw InputError("--out: " + a.out.string() + " is a folder; name the file");
+    std::optional<ImageD> target;
+    if (scene.target && !a.no_check) target = io::load_target_image(scene, limits);
+    if (kind == ExportFile::stl || kind == ExportFile::obj) {
+        export_mesh(a, kind, scene, hm, target);
+    } else {
+        const double alpha = scene.surface.phong_alpha;
+        const BSplineSurface spline = fit_bspline(hm, alpha, spline_samples_per_cell);
+        const SplineFitReport fit = check_spline_fit(spline, hm, alpha, spline_samples_per_cell);
+        const io::FormCheck fc =
+            io::write_and_check_form(kind == ExportFile::step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
+                                     hm, spline, target ? &*target : nullptr, a.threads);
+        std::printf("wrote %s: %.1f MB in %.1f s, valid: %s; a bicubic B-spline of %d x %d poles within %.2g um "
+                    "(max) of the designed surface, normals within %.3f mrad (90th percentile), %.2f mrad (max)\n",
+                    a.out.string().c_str(), double(fc.bytes) / 1e6, fc.write_seconds, fc.valid.c_str(), spline.nu,
+                    spline.nv, fit.max_height_error * 1e6, fit.p90_normal_error * 1e3, fit.max_normal_error * 1e3);
+        if (fc.cells)
+            std::printf("  error_physical %.4f: the file read back, tessellated (%lld triangles) and traced with its "
+                        "normals, %.0f rays per cell\n",
+                        fc.cells->error, (long long)fc.triangles, fc.cells->rays_per_cell);
+    }
+    if (target) {
+        const CellMeans designed = designed_cell_means(scene, hm, *target, physical_cell_mean_options(scene.optimise.seed),
+                                                       a.threads);
+        std::printf("  the designed surface itself (%s): %.4f\n", a.heightmap.string().c_str(), designed.error);
+    }
+    return 0;
+}
+
 // The parsed command line: which command, and its arguments.
 struct CommandLine {
     RenderArgs render;
     DesignArgs design;
+    ExportArgs export_;
     bool is_render = false;
+    bool is_export = false;
 };
 
 // Parses argv into `cl`. Returns the exit code when parsing ends the program (help,
@@ -799,6 +944,18 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
                            "(default 30)")
         ->check(CLI::Range(1e-3, 1e6));
 #endif
+    ExportArgs& ea = cl.export_;
+    CLI::App* export_cmd = app.add_subcommand(
+        "export", "write a height map's surface as STEP, a grid sag table, STL or OBJ, without designing (docs/export.md)");
+    export_cmd->add_option("scene", ea.scene, "scene file (JSON): the surface's placement, material and target")
+        ->required();
+    export_cmd->add_option("--heightmap", ea.heightmap, "the surface (PFM, e.g. a design's heightmap.pfm)")->required();
+    export_cmd->add_option("--format", ea.format, "step, sag (OpticStudio grid sag .dat), stl or obj")->required();
+    export_cmd->add_option("--out", ea.out, "the file to write")->required();
+    export_cmd->add_option("--threads", ea.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
+    export_cmd->add_flag("--no-check", ea.no_check,
+                         "skip tracing the exported form (by default it is judged against the scene's target)");
+    export_cmd->add_option("--limit", ea.limits, limit_help)->allow_extra_args(false);
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, a limit exceeded (docs/limits.md) or a file that cannot be read or "
                "written, 1 internal error, 130 design interrupted (results written).");
@@ -817,6 +974,7 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
         return 2;
     }
     cl.is_render = render->parsed();
+    cl.is_export = export_cmd->parsed();
     return std::nullopt;
 }
 
@@ -824,7 +982,10 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
 // call the same parsers, so this only makes them fail before any work (and gives the
 // command-line fuzzer, tests/fuzz, the whole argument layer).
 void check_arguments(const CommandLine& cl) {
-    if (cl.is_render) {
+    if (cl.is_export) {
+        parse_limits(cl.export_.limits);
+        parse_export_format(cl.export_.format);
+    } else if (cl.is_render) {
         parse_limits(cl.render.limits);
         if (!cl.render.material.empty()) parse_mesh_material(cl.render.material);
         if (!cl.render.tracer.empty()) parse_tracer(cl.render.tracer);
@@ -840,6 +1001,7 @@ int cli_main(int argc, char** argv) {
     if (const std::optional<int> exit_code = parse_command_line(argc, argv, cl)) return *exit_code;
     try {
         check_arguments(cl);
+        if (cl.is_export) return world_rank == 0 ? run_export(cl.export_) : 0;
         if (cl.is_render) return run_render(cl.render);
         return run_design(cl.design);
     } catch (const InputError& e) {

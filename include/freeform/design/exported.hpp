@@ -17,6 +17,7 @@
 #include "../trace/embree.hpp"
 #include "../trace/setup.hpp"
 #include "cell_means.hpp"
+#include "fabrication.hpp"
 
 namespace freeform {
 
@@ -29,6 +30,11 @@ struct ExportedTrace {
 struct ExportedGeometry {
     TriangleMesh mesh;  // surface frame
     std::optional<double> solid_ior;  // a lens: the mesh is a refractive solid of this index
+    // A smooth form (spline, STEP part): the mesh is a fine tessellation whose front is
+    // traced with its vertex normals interpolated, the first `smooth_triangles` of a lens
+    // solid (its walls and back stay flat). Facets of the milled mesh: false.
+    bool smooth = false;
+    std::int64_t smooth_triangles = -1;
 };
 
 inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, int subdivisions) {
@@ -38,13 +44,44 @@ inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& s
     return {tessellate_surface(surface, alpha, subdivisions, false), std::nullopt};
 }
 
+// The exported part of a Fabrication (its per-cell levels), in the surface frame.
+inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, const Fabrication& fab) {
+    ExportedGeometry g{fabrication_mesh(scene, surface, fab, false), std::nullopt};
+    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) g.solid_ior = lens->ior;
+    return g;
+}
+
+// A smooth form of the design (`point` as in detail::tessellate_local: a fitted spline,
+// the re-read STEP part) tessellated with k × k facet pairs per cell over `grid`'s active
+// cells, its vertex normals those of the form. Traced with interpolated normals, the
+// facets only place the hits: the normal error falls as k⁻² instead of k⁻¹, and the
+// figure settles at small k (docs/export.md measures it).
+template <class PointFn>
+ExportedGeometry smooth_geometry(const Scene& scene, const Heightmap& grid, int k, PointFn&& point) {
+    ExportedGeometry g;
+    g.smooth = true;
+    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) {
+        g.mesh = lens_solid_of(grid, *lens, k, point, true, false);
+        std::int64_t cells = 0;
+        for (int j = 0; j + 1 < grid.ny(); ++j)
+            for (int i = 0; i + 1 < grid.nx(); ++i) cells += grid.cell_active(i, j) ? 1 : 0;
+        g.smooth_triangles = 2 * std::int64_t(k) * k * cells;
+        g.solid_ior = lens->ior;
+    } else {
+        detail::check_export_args(grid, 0.0, k);
+        std::vector<std::int32_t> fine_index;
+        g.mesh = detail::tessellate_local(grid, k, fine_index, point);
+    }
+    return g;
+}
+
 // Traces `rays` (aimed at `surface`'s aperture) through the exported geometry with the
 // scene's receiver (its deposit included).
 template <HostPolicy P>
 ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometry& geometry, const RaySet& rays) {
     PathParams pp = make_path_params(scene);
     pp.phong_alpha = 0.0f;  // flat facets: the mesh is its geometry
-    pp.interpolated_normals = false;
+    pp.interpolated_normals = geometry.smooth;
     RaySet lens_rays;  // outlives the tracer, which refers to it
     std::optional<EmbreeTracer> tracer;
     if (geometry.solid_ior) {
@@ -53,7 +90,8 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometr
         start_above(scene.light, scene.surface.size, geometry.mesh, lens_rays);
         pp.material = MaterialView{};
         std::vector<ExtraMesh> meshes;
-        meshes.push_back(ExtraMesh{geometry.mesh, MeshMaterial::refractive(*geometry.solid_ior)});
+        meshes.push_back(
+            ExtraMesh{geometry.mesh, MeshMaterial::refractive(*geometry.solid_ior), geometry.smooth_triangles});
         tracer.emplace(lens_rays, pp, std::move(meshes), thread_count(policy));
     } else {
         tracer.emplace(geometry.mesh, rays, pp, std::vector<ExtraMesh>{}, thread_count(policy));

@@ -23,6 +23,7 @@
 #include "../objective/target.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
+#include "../surface/bspline.hpp"
 #include "../surface/smooth.hpp"
 #include "../surface/tool.hpp"
 #include "../trace/heightfield.hpp"
@@ -115,7 +116,28 @@ struct ExportChecks {
     std::optional<double> energy_exported;
     std::optional<double> l1_to_design;     // between its irradiance and the design's
     std::optional<CellMeans> cells;         // converged cell means: error_physical
+    // The smooth form (surface.step, surface.dat): the B-spline fitted to the designed
+    // surface, and how closely it follows it (docs/export.md).
+    BSplineSurface spline;
+    SplineFitReport spline_fit;
+    // The designed surface itself (the Phong height field the design simulated), traced
+    // the same way: what every exported form is compared with.
+    std::optional<CellMeans> designed;
 };
+
+// Samples per cell and direction of the spline fit: the fit's height error is about a
+// nanometre at 2 and does not improve beyond 4 (docs/export.md).
+inline constexpr int spline_samples_per_cell = 4;
+
+// The designed surface's cell means: the height field traced with its Phong patches.
+inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
+                                     const CellMeanOptions& options, int threads) {
+    return converged_cell_means(scene, surface, &target, options,
+                                [&](const Scene& s, const RaySet& rays, Histogram& h, TraceTotals& t) {
+                                    HeightfieldTracer(surface, rays, make_path_params(s))
+                                        .trace_all(exec::omp_t{threads}, h, t);
+                                });
+}
 
 // Cell means for error_physical: rays of their own jitter, not the design's, so the figure
 // is not the one the design was fitted to.
@@ -127,10 +149,13 @@ inline CellMeanOptions physical_cell_mean_options(std::uint64_t seed) {
 
 inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, const TracedDesign& fitted,
                                  const ImageD& target, int threads) {
-    ExportChecks c{make_fabrication(scene, surface), {}, {}, {}, {}, {}};
+    ExportChecks c{make_fabrication(scene, surface), {}, {}, {}, {}, {}, {}, {}, {}};
     c.machining = machining_report(scene, surface, c.fabrication.mesh);
+    c.spline = fit_bspline(surface, scene.surface.phong_alpha, spline_samples_per_cell);
+    c.spline_fit = check_spline_fit(c.spline, surface, scene.surface.phong_alpha, spline_samples_per_cell);
+    c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(scene.optimise.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)
-    const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
+    const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication);
     const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted.rays);
     c.error_exported = l1_error(et.histogram, fitted.target);
     c.energy_exported = et.totals.energy();
@@ -138,7 +163,7 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
     c.cells = exported_cell_means(exec::omp_t{threads}, scene, surface, geometry, &target,
                                   physical_cell_mean_options(scene.optimise.seed));
 #else
-    (void)fitted, (void)target, (void)threads;
+    (void)fitted;
 #endif
     return c;
 }

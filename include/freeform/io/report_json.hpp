@@ -15,6 +15,7 @@
 #include "../design/designer.hpp"
 #include "../design/pipeline.hpp"
 #include "../scene/json.hpp"
+#include "forms.hpp"
 
 namespace freeform::io {
 
@@ -135,6 +136,14 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
         c.fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
     exported["facet_normal_error_mrad"] = c.fabrication.normal_error * 1e3;
     exported["facet_normal_tolerance_mrad"] = c.fabrication.normal_tolerance * 1e3;
+    exported["tolerance_met"] = c.fabrication.tolerance_met;
+    if (!c.fabrication.tolerance_met)
+        exported["tolerance_missed"] =
+            c.fabrication.automatic
+                ? "the facets' normal error exceeds the tolerance at the finest k that "
+                  "optimise.export_max_triangles (and the cap of 16) allows; surface.step / surface.dat keep the "
+                  "designed surface (docs/export.md)"
+                : "the facets' normal error exceeds the tolerance at the fixed optimise.export_subdivisions";
     exported["triangles"] = c.fabrication.mesh.triangles.size();
     if (c.cells) {
         m["error_exported"] = *c.error_exported;
@@ -148,8 +157,50 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
         m["error_physical"] = nullptr;
         exported["not_traced"] = "built without Embree";
     }
+    exported["spline_fit"] = {
+        {"samples_per_cell", c.spline_fit.samples_per_cell},
+        {"poles", {c.spline.nu, c.spline.nv}},
+        {"max_height_error_m", c.spline_fit.max_height_error},
+        {"rms_height_error_m", c.spline_fit.rms_height_error},
+        {"max_normal_error_mrad", c.spline_fit.max_normal_error * 1e3},
+        {"p90_normal_error_mrad", c.spline_fit.p90_normal_error * 1e3},
+        {"against", "the designed (Phong) surface at two points per cell off the fit's samples"}};
+    nlohmann::json forms = nlohmann::json::object();
+    if (c.designed)
+        forms["designed"] = {{"error_physical", c.designed->error},
+                             {"energy", c.designed->totals.energy()},
+                             {"rays_per_cell", c.designed->rays_per_cell},
+                             {"traced", "heightmap.pfm as designed: its Phong patches (the reference)"}};
+    if (c.cells)
+        forms["mesh"] = {{"error_physical", c.cells->error},
+                         {"energy", c.cells->totals.energy()},
+                         {"rays_per_cell", c.cells->rays_per_cell},
+                         {"triangles", c.fabrication.mesh.triangles.size()},
+                         {"traced", "surface.obj/.stl as flat triangles"}};
+    exported["forms"] = forms;
     m["export"] = exported;
     m["fabrication"] = fabrication_json(c.machining, scene.surface.tool_radius);
+}
+
+// metrics.json's export.forms entry of a smooth form written and read back (io/forms.hpp).
+inline nlohmann::json form_json(const FormCheck& f) {
+    nlohmann::json j;
+    j["file"] = f.file.filename().string();
+    j["bytes"] = f.bytes;
+    j["write_seconds"] = f.write_seconds;
+    j["check_seconds"] = f.check_seconds;
+    j["valid"] = f.valid;
+    if (f.cells) {
+        j["error_physical"] = f.cells->error;
+        j["energy"] = f.cells->totals.energy();
+        j["rays_per_cell"] = f.cells->rays_per_cell;
+        j["traced"] = "the file read back, tessellated with " + std::to_string(f.tessellation) +
+                      " x " + std::to_string(f.tessellation) + " facet pairs per cell (" +
+                      std::to_string(f.triangles) + " triangles) shaded with its own normals";
+    } else {
+        j["error_physical"] = nullptr;
+    }
+    return j;
 }
 
 // A finished design's metrics.json (docs/measures.md), but for what only its caller

@@ -721,6 +721,29 @@ inline void write_export_subdivisions(const OptimiseSpec& o, std::string_view n,
     j[std::string(n)] = o.export_subdivisions <= 0 ? json("auto") : json(o.export_subdivisions);
 }
 
+// "auto" or a list of distinct format names.
+inline void read_export_formats(const json& v, const std::string& p, OptimiseSpec& o) {
+    o.export_formats.clear();
+    if (v.is_string() && v.get<std::string>() == "auto") return;
+    if (!v.is_array() || v.empty())
+        throw error(p, "expected \"auto\" or a non-empty list of \"mesh\", \"step\", \"sag\", got " + describe(v));
+    for (std::size_t k = 0; k < v.size(); ++k) {
+        const auto f = enumeration<ExportFormat>(v[k], p + "[" + std::to_string(k) + "]", export_format_names);
+        if (std::find(o.export_formats.begin(), o.export_formats.end(), f) != o.export_formats.end())
+            throw error(p, "\"" + std::string(to_string(f)) + "\" is listed twice");
+        o.export_formats.push_back(f);
+    }
+}
+inline void write_export_formats(const OptimiseSpec& o, std::string_view n, json& j) {
+    if (o.export_formats.empty()) {
+        j[std::string(n)] = "auto";
+        return;
+    }
+    json list = json::array();
+    for (const ExportFormat f : o.export_formats) list.push_back(std::string(to_string(f)));
+    j[std::string(n)] = list;
+}
+
 // An enum field M whose names, in its values' order, are Names (scene/scene.hpp).
 template <auto M, const auto& Names>
 void read_enum_key(const json& v, const std::string& p, OptimiseSpec& o) {
@@ -782,6 +805,7 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {.name = "export_subdivisions", .read = read_export_subdivisions, .write = write_export_subdivisions},
         {"export_tolerance", &S::export_tolerance, 0.01, 10},
         {"export_max_triangles", &S::export_max_triangles, 1000, 1'000'000'000},
+        {.name = "export_formats", .read = read_export_formats, .write = write_export_formats},
     };
     return table;
 }

@@ -91,6 +91,12 @@ enum class BanditKind { uniform, history, ucb1, discounted_ucb };
 inline constexpr std::array<std::string_view, 2> evaluation_names{"incremental", "full"};
 inline constexpr std::array<std::string_view, 2> kernel_shape_names{"bank", "isotropic"};
 inline constexpr std::array<std::string_view, 4> bandit_kind_names{"uniform", "history", "ucb1", "discounted-ucb"};
+// The forms a design's surface is exported in (docs/export.md): the milled facets
+// (surface.obj/.stl), the smooth B-spline part (surface.step, builds with Open CASCADE)
+// and the grid sag table (surface.dat).
+enum class ExportFormat { mesh, step, sag };
+inline constexpr std::array<std::string_view, 3> export_format_names{"mesh", "step", "sag"};
+inline std::string_view to_string(ExportFormat f) { return export_format_names[std::size_t(f)]; }
 inline std::string_view to_string(EvaluationMode e) { return evaluation_names[std::size_t(e)]; }
 inline std::string_view to_string(KernelShapes k) { return kernel_shape_names[std::size_t(k)]; }
 inline std::string_view to_string(BanditKind b) { return bandit_kind_names[std::size_t(b)]; }
@@ -149,6 +155,9 @@ struct OptimiseSpec {
     double export_tolerance = 0.05;   // "auto": light of a facet lands within this many receiver
                                       // cells of where the simulated patch sends it
     std::int64_t export_max_triangles = 2'000'000;  // "auto": k no larger than this allows
+    // What a design writes, the first leading its summary; empty: "auto" (the mesh, and
+    // STEP in builds with Open CASCADE).
+    std::vector<ExportFormat> export_formats;
     std::int64_t progress_every = 2000;
 };
 

@@ -166,8 +166,12 @@ inline void check_export_args(const Heightmap& hm, double phong_alpha, int subdi
 
 // The tessellated sheet in the surface frame. `fine_index` receives, per fine-grid
 // vertex (row-major, ((nx-1)k+1) columns), its index in the mesh or -1 when no active
-// cell uses it.
-inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, std::vector<std::int32_t>& fine_index) {
+// cell uses it. `point(ci, cj, a, b)` gives the surface point (a PhongVertex) at
+// cell-local (a, b) of cell (ci, cj): the Phong patches for the milled mesh, another
+// smooth form of the design (a fitted spline) for judging it. Each fine vertex is
+// computed once, from one of the cells that share it.
+template <class PointFn>
+TriangleMesh tessellate_local(const Heightmap& hm, int k, std::vector<std::int32_t>& fine_index, PointFn&& point) {
     const int nx = hm.nx(), ny = hm.ny();
     const int fx = (nx - 1) * k + 1, fy = (ny - 1) * k + 1;
     fine_index.assign(std::size_t(fx) * fy, -1);
@@ -189,7 +193,7 @@ inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, s
             // the one to its upper right, the last one at the far borders.
             const int ci = std::min(I / k, nx - 2), cj = std::min(J / k, ny - 2);
             const double a = double(I - ci * k) / k, b = double(J - cj * k) / k;
-            const PhongVertex pv = phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
+            const PhongVertex pv = point(ci, cj, a, b);
             mesh.vertices.push_back(pv.position);
             mesh.normals.push_back(pv.normal);
         }
@@ -204,6 +208,11 @@ inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, s
             mesh.triangles.push_back({v00, v11, v01});
         }
     return mesh;
+}
+
+inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, std::vector<std::int32_t>& fine_index) {
+    return tessellate_local(hm, k, fine_index,
+                            [&](int ci, int cj, double a, double b) { return phong_vertex_in_cell(hm, ci, cj, a, b, alpha); });
 }
 
 inline void to_world(const Frame& f, TriangleMesh& mesh) {
@@ -246,9 +255,16 @@ inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, i
 // TriangleMesh::compute_normals() gives area-weighted ones).
 // Throws InputError for a thickness that is not positive and finite or that does not
 // clear the lowest point of the front, and for the arguments tessellate_surface rejects.
-inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, int subdivisions,
-                               bool world_frame = true) {
-    detail::check_export_args(hm, phong_alpha, subdivisions);
+//
+// lens_solid_of builds the same solid over another form of the front (`point` as in
+// detail::tessellate_local); lens_solid below is it over the Phong patches. With
+// `front_normals` the front keeps its vertex normals (the other vertices get the back
+// face's, −w), for tracing the front as a smooth surface (design/exported.hpp); the
+// front's 2k² triangles per active cell come first in the mesh either way.
+template <class PointFn>
+TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, int subdivisions, PointFn&& point,
+                           bool front_normals, bool world_frame) {
+    detail::check_export_args(hm, 0.0, subdivisions);
     const double t = lens.thickness;
     if (!(t > 0) || !std::isfinite(t))
         throw InputError("lens thickness must be a positive finite number, got " + std::to_string(t));
@@ -256,8 +272,8 @@ inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phon
     const int nx = hm.nx(), ny = hm.ny();
     const int fx = (nx - 1) * k + 1;
     std::vector<std::int32_t> fine_index;
-    TriangleMesh mesh = detail::tessellate_local(hm, double(phong_alpha), k, fine_index);
-    mesh.normals.clear();
+    TriangleMesh mesh = detail::tessellate_local(hm, k, fine_index, point);
+    if (!front_normals) mesh.normals.clear();
     const std::size_t front_count = mesh.vertices.size();
     for (std::size_t v = 0; v < front_count; ++v)
         if (!(mesh.vertices[v].z > -t))
@@ -273,6 +289,7 @@ inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phon
             const Vec3d p = mesh.vertices[std::size_t(front)];
             b = std::int32_t(mesh.vertices.size());
             mesh.vertices.push_back({p.x, p.y, -t});
+            if (front_normals) mesh.normals.push_back({0, 0, -1});
         }
         return b;
     };
@@ -325,11 +342,23 @@ inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phon
                 centre = centre + mesh.vertices[std::size_t(back(fine(start[s][0], start[s][1])))];
             const auto c = std::int32_t(mesh.vertices.size());
             mesh.vertices.push_back(0.25 * centre);
+            if (front_normals) mesh.normals.push_back({0, 0, -1});
             for (std::size_t m = 0; m < ring.size(); ++m)
                 mesh.triangles.push_back({c, ring[(m + 1) % ring.size()], ring[m]});
         }
     if (world_frame) detail::to_world(hm.frame(), mesh);
     return mesh;
+}
+
+// The solid over the Phong patches: what is milled or printed (see lens_solid_of above).
+inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, int subdivisions,
+                               bool world_frame = true) {
+    detail::check_export_args(hm, phong_alpha, subdivisions);
+    const double alpha = double(phong_alpha);
+    return lens_solid_of(
+        hm, lens, subdivisions,
+        [&](int ci, int cj, double a, double b) { return phong_vertex_in_cell(hm, ci, cj, a, b, alpha); }, false,
+        world_frame);
 }
 
 // Topology and size of a triangle mesh.

@@ -61,9 +61,16 @@ namespace freeform {
 // what hits it; a refractive mesh is the closed, outward-oriented boundary of a solid
 // (check_refractive_solid, surface/export.hpp), crossed by Snell's law. All are traced as
 // their flat facets unless PathParams::interpolated_normals asks for the vertex normals.
+//
+// smooth_triangles: with interpolated normals, only the mesh's first smooth_triangles
+// triangles are shaded with their vertex normals and the rest stay flat (their facet
+// normal). A lens solid traced as a smooth front (design/exported.hpp) needs this: its
+// walls and back face are flat, and their rim vertices are shared with the front.
+// Negative: every triangle.
 struct ExtraMesh {
     TriangleMesh mesh;
     MeshMaterial material{};
+    std::int64_t smooth_triangles = -1;
 };
 
 // Moves a mesh given in world coordinates into the frame of the surface (the tracing
@@ -458,6 +465,7 @@ private:
         std::vector<Vec3> p, n;
         std::vector<std::array<std::int32_t, 3>> tri;
         std::vector<std::uint8_t> flip;  // only for a traced surface mesh
+        std::int64_t smooth = std::numeric_limits<std::int64_t>::max();  // ExtraMesh::smooth_triangles
         HitKind kind = HitKind::absorber;
         float ior = 1;  // refractive meshes
     };
@@ -657,6 +665,7 @@ private:
                      : material.is_mirror()   ? HitKind::mirror_mesh
                                               : HitKind::absorber;
             d.ior = float(material.ior);
+            if (meshes[k].smooth_triangles >= 0) d.smooth = meshes[k].smooth_triangles;
             meshes_.push_back(std::move(d));
         }
         for (std::size_t m = first; m < meshes_.size(); ++m) {
@@ -692,6 +701,10 @@ private:
             for (int k = 0; k < 3; ++k) {
                 hit.p[k] = m.p[std::size_t(t[std::size_t(k)])];
                 hit.n[k] = m.n[std::size_t(t[std::size_t(k)])];
+            }
+            if (std::int64_t(prim) >= m.smooth) {
+                const Vec3 facet = normalize(cross(hit.p[1] - hit.p[0], hit.p[2] - hit.p[0]));
+                hit.n[0] = hit.n[1] = hit.n[2] = facet;
             }
         }
         return hit;
