@@ -191,7 +191,9 @@ TEST_CASE("STEP export and import errors") {
         CHECK_THROWS_AS(io::write_step(dir.path / "b.step", bad, {-1.0}), InputError);
     }
     SUBCASE("unwritable place") {
-        const auto file = dir.path / "no such folder" / "c.step";
+        // Under a regular file, where no folder can be made.
+        { std::ofstream(dir.path / "a-file") << "x"; }
+        const auto file = dir.path / "a-file" / "c.step";
         try {
             io::write_step(file, s, {lowest_pole(s) - 0.001});
             FAIL("no exception");

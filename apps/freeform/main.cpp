@@ -36,6 +36,7 @@
 #include <nlohmann/json.hpp>
 
 #include <freeform/freeform.hpp>
+#include <freeform/io/forms.hpp>
 #include <freeform/scene/json.hpp>
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
@@ -455,20 +456,17 @@ RankLayout rank_layout(int threads) {
 // A design's files. Every file is staged and moved into place together, metrics.json
 // last (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside
 // a partial result, and a failed write leaves the previous results as they were. The
-// smooth forms (surface.step, surface.dat) are read back from the staging folder and
-// judged before metrics.json is written: their figures go into export.forms.
-void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d, const ImageD& irradiance,
-                          const ImageD& target_img, const ImageD& target, const std::vector<ExportFormat>& formats,
+// smooth forms (surface.step, surface.dat) are written first, read back from the staging
+// folder and judged: their figures go into export.forms, and the images show the cell
+// means of the form that leads (optimise.export_formats), else of the mesh, else (no
+// Embree) the design's own irradiance.
+void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d, const ImageD& target,
+                          const std::vector<ExportFormat>& formats,
                           const std::function<void(const std::string&)>& phase) {
     io::StagedOutput staged(out);
     const TriangleMesh& fab = d.exported.fabrication.mesh;
-    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, io::convergence_csv(d.result)); });
-    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, d.result.surface); });
-    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
-    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
-    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
-    staged.write("comparison.png",
-                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
+    std::optional<CellMeans> shown;
+    std::string shown_what = "the design's own irradiance (a build without Embree)";
     for (const ExportFormat format : formats) {
         if (format == ExportFormat::mesh) {
             staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
@@ -478,14 +476,37 @@ void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d
         const char* name = format == ExportFormat::step ? "surface.step" : "surface.dat";
         phase(std::string("writing ") + name + ", reading it back and tracing it");
         staged.write(name, [&](const fs::path& f) {
-            const io::FormCheck fc = io::write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline,
-                                                              &target, d.scene.optimise.threads);
+            io::FormCheck fc = io::write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline,
+                                                        &target, d.scene.optimise.threads);
             m["export"]["forms"][std::string(to_string(format))] = io::form_json(fc);
+            if (format == formats.front() && fc.cells) {
+                // The form the scene exports first is the part judged: error_physical is its figure.
+                m["error_physical"] = fc.cells->error;
+                m["energy_physical"] = fc.cells->totals.energy();
+                m["error_physical_form"] = std::string(to_string(format));
+                shown = std::move(fc.cells);
+                shown_what = std::string("the cell means of ") + name + ", read back and traced";
+            }
         });
     }
+    if (!shown && d.exported.cells) {
+        m["error_physical_form"] = "mesh";
+        shown = d.exported.cells;
+        shown_what = "the cell means of surface.obj, traced as flat triangles";
+    }
+    const ImageD irradiance = shown ? shown->histogram.to_image() : d.fitted.histogram.to_image();
+    const ImageD target_img = shown ? target_image_of(shown->target) : target_image_of(d.fitted.target);
+    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, io::convergence_csv(d.result)); });
+    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, d.result.surface); });
+    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
+    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
+    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
+    staged.write("comparison.png",
+                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
     json formats_json = json::array();
     for (const ExportFormat format : formats) formats_json.push_back(std::string(to_string(format)));
     m["export"]["formats"] = formats_json;
+    m["export"]["images_show"] = shown_what;
     staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
     staged.commit("metrics.json");
 }
@@ -744,16 +765,10 @@ int run_design(const DesignArgs& a) {
 #if defined(FREEFORM_WITH_MPI)
     if (replica_run) m["replicas"] = replicas_json(*replicas, *replica_run, d.result.held_out.total >= 0);
 #endif
-    // The images show cell means of the exported part where it can be traced (Embree),
-    // else the design's own irradiance.
-    const std::optional<CellMeans>& cells = d.exported.cells;
-    const ImageD irradiance = cells ? cells->histogram.to_image() : d.fitted.histogram.to_image();
-    const ImageD target_img = cells ? target_image_of(cells->target) : target_image_of(d.fitted.target);
-
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
     if (!quiet) status.show("writing the results");
-    write_design_outputs(a.out, m, d, irradiance, target_img, target, formats, [&](const std::string& what) {
+    write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
         if (!quiet) status.show(what);
     });
     status.finish();
@@ -874,6 +889,21 @@ struct CommandLine {
     bool is_export = false;
 };
 
+// The `export` subcommand's options.
+CLI::App* add_export_command(CLI::App& app, ExportArgs& ea, const char* limit_help) {
+    CLI::App* cmd = app.add_subcommand(
+        "export", "write a height map's surface as STEP, a grid sag table, STL or OBJ, without designing (docs/export.md)");
+    cmd->add_option("scene", ea.scene, "scene file (JSON): the surface's placement, material and target")->required();
+    cmd->add_option("--heightmap", ea.heightmap, "the surface (PFM, e.g. a design's heightmap.pfm)")->required();
+    cmd->add_option("--format", ea.format, "step, sag (OpticStudio grid sag .dat), stl or obj")->required();
+    cmd->add_option("--out", ea.out, "the file to write")->required();
+    cmd->add_option("--threads", ea.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
+    cmd->add_flag("--no-check", ea.no_check,
+                  "skip tracing the exported form (by default it is judged against the scene's target)");
+    cmd->add_option("--limit", ea.limits, limit_help)->allow_extra_args(false);
+    return cmd;
+}
+
 // Parses argv into `cl`. Returns the exit code when parsing ends the program (help,
 // version, a usage error: one line on stderr, exit 2), nothing when the command runs.
 std::optional<int> parse_command_line(int argc, const char* const* argv, CommandLine& cl) {
@@ -944,18 +974,7 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
                            "(default 30)")
         ->check(CLI::Range(1e-3, 1e6));
 #endif
-    ExportArgs& ea = cl.export_;
-    CLI::App* export_cmd = app.add_subcommand(
-        "export", "write a height map's surface as STEP, a grid sag table, STL or OBJ, without designing (docs/export.md)");
-    export_cmd->add_option("scene", ea.scene, "scene file (JSON): the surface's placement, material and target")
-        ->required();
-    export_cmd->add_option("--heightmap", ea.heightmap, "the surface (PFM, e.g. a design's heightmap.pfm)")->required();
-    export_cmd->add_option("--format", ea.format, "step, sag (OpticStudio grid sag .dat), stl or obj")->required();
-    export_cmd->add_option("--out", ea.out, "the file to write")->required();
-    export_cmd->add_option("--threads", ea.threads, "worker threads (0 = all cores)")->check(CLI::Range(0, 65536));
-    export_cmd->add_flag("--no-check", ea.no_check,
-                         "skip tracing the exported form (by default it is judged against the scene's target)");
-    export_cmd->add_option("--limit", ea.limits, limit_help)->allow_extra_args(false);
+    CLI::App* export_cmd = add_export_command(app, cl.export_, limit_help);
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, a limit exceeded (docs/limits.md) or a file that cannot be read or "
                "written, 1 internal error, 130 design interrupted (results written).");

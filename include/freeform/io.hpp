@@ -1,11 +1,11 @@
 #pragma once
 // Umbrella header of the io module: every file freeform reads or writes — scene files,
-// target images and fonts, PNG/PFM images, height maps, OBJ/STL meshes, grid sag tables (and STEP parts), the JSON of a
-// design's report — and the staged writing of a result folder.
+// target images and fonts, PNG/PFM images, height maps, OBJ/STL meshes, grid sag tables, the JSON of a design's
+// report — and the staged writing of a result folder.
 // Consumers link libstb (pkg-config `stb`), which provides the stb implementations.
 #include "io/file.hpp"
 #include "io/font.hpp"
-#include "io/forms.hpp"
+#include "io/form_check.hpp"
 #include "io/heightmap.hpp"
 #include "io/image.hpp"
 #include "io/mesh.hpp"
@@ -15,7 +15,6 @@
 #include "io/scene_file.hpp"
 #include "io/staged_output.hpp"
 #include "io/target.hpp"
-// STEP export through Open CASCADE: only with freeform::step, which defines FREEFORM_WITH_OCCT.
-#if defined(FREEFORM_WITH_OCCT)
-#include "io/step.hpp"
-#endif
+// Not included here, because with freeform::step they bring in Open CASCADE's headers
+// (seconds of compile time per file): io/step.hpp (STEP parts) and io/forms.hpp (the
+// smooth forms written, read back and judged). Include them where they are used.

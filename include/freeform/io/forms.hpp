@@ -3,7 +3,9 @@
 // themselves (docs/export.md): surface.step read back by Open CASCADE, surface.dat read
 // back by our grid sag reader, each tessellated and traced to converged cell means as
 // error_physical is (design/exported.hpp, smooth_geometry). What is judged is what the
-// file holds, not the spline it was written from.
+// file holds, not the spline it was written from. With freeform::step this header brings
+// in Open CASCADE's headers (io/step.hpp): the io umbrella leaves it out, include it
+// where forms are written.
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -15,61 +17,13 @@
 #include "../design/pipeline.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/bspline.hpp"
+#include "form_check.hpp"
 #include "sag.hpp"
 #if defined(FREEFORM_WITH_OCCT)
 #include "step.hpp"
 #endif
 
 namespace freeform::io {
-
-// Facet pairs per grid cell and direction for tracing a smooth form: its vertex normals
-// are interpolated, so the figure settles fast (docs/export.md: k = 2 and 4 differ by
-// 0.0004 on a photograph); at most 6 million triangles.
-inline int judge_subdivisions(const Heightmap& grid) {
-    const double cells = double(grid.nx() - 1) * double(grid.ny() - 1);
-    return std::clamp(int(std::floor(std::sqrt(6.0e6 / (2.0 * cells)))), 1, 4);
-}
-
-// How far under the lowest point of a mirror's face its STEP solid's flat back lies.
-inline constexpr double mirror_step_thickness = 0.005;
-
-// One smooth form written and judged.
-struct FormCheck {
-    ExportFormat format = ExportFormat::step;
-    std::filesystem::path file;
-    std::uintmax_t bytes = 0;
-    double write_seconds = 0;       // writing the file
-    double check_seconds = 0;       // reading it back, tessellating and tracing it
-    int tessellation = 0;           // k of the traced tessellation
-    std::int64_t triangles = 0;     // of the traced tessellation
-    std::optional<CellMeans> cells;  // empty without Embree or without a target
-    std::string valid = "yes";      // the file's own check (STEP: BRepCheck_Analyzer)
-};
-
-// Whether a build can write `f`.
-inline bool format_available(ExportFormat f) {
-#if defined(FREEFORM_WITH_OCCT)
-    (void)f;
-    return true;
-#else
-    return f != ExportFormat::step;
-#endif
-}
-
-// The formats a scene asks for ("auto": the mesh, and STEP where Open CASCADE is built).
-// Throws InputError naming the key for a format this build cannot write.
-inline std::vector<ExportFormat> export_formats(const Scene& scene) {
-    std::vector<ExportFormat> f = scene.optimise.export_formats;
-    if (f.empty()) {
-        f.push_back(ExportFormat::mesh);
-        if (format_available(ExportFormat::step)) f.push_back(ExportFormat::step);
-    }
-    for (const ExportFormat x : f)
-        if (!format_available(x))
-            throw InputError("optimise.export_formats: \"" + std::string(to_string(x)) +
-                             "\" needs a build with Open CASCADE (libocct-*-dev; see README)");
-    return f;
-}
 
 namespace forms_detail {
 
@@ -126,18 +80,7 @@ inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem
             back = -lens->thickness;
         else
             back = *std::min_element(spline.z.begin(), spline.z.end()) - mirror_step_thickness;
-        // Open CASCADE writes in place: write beside the file and rename, so that a failed
-        // write never leaves a partial part under the file's name.
-        std::filesystem::path partial = file;
-        partial += ".partial";
-        try {
-            write_step(partial, spline, StepSolid{back, scene.name.empty() ? "freeform surface" : scene.name});
-            std::filesystem::rename(partial, file);
-        } catch (...) {
-            std::error_code ignored;
-            std::filesystem::remove(partial, ignored);
-            throw;
-        }
+        write_step(file, spline, StepSolid{back, scene.name.empty() ? "freeform surface" : scene.name});
         fc.write_seconds = since(t0);
         fc.bytes = std::filesystem::file_size(file);
         const auto t1 = std::chrono::steady_clock::now();

@@ -15,7 +15,7 @@
 #include "../design/designer.hpp"
 #include "../design/pipeline.hpp"
 #include "../scene/json.hpp"
-#include "forms.hpp"
+#include "form_check.hpp"
 
 namespace freeform::io {
 

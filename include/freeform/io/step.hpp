@@ -38,6 +38,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -65,7 +66,11 @@
 #include <STEPControl_Reader.hxx>
 #include <STEPControl_Writer.hxx>
 #include <StepBasic_Product.hxx>
+#include <StepAP214.hxx>
+#include <StepAP214_Protocol.hxx>
+#include <StepData_Protocol.hxx>
 #include <StepData_StepModel.hxx>
+#include <StepData_StepWriter.hxx>
 #include <Standard_Failure.hxx>
 #include <TCollection_AsciiString.hxx>
 #include <TCollection_HAsciiString.hxx>
@@ -92,6 +97,7 @@
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../surface/bspline.hpp"
+#include "file.hpp"
 
 namespace freeform::io {
 
@@ -210,6 +216,180 @@ inline void check_spline(const BSplineSurface& s) {
         if (!std::isfinite(z)) bad("non-finite pole height");
 }
 
+// The top face's surface: x = pole_u, y = pole_v, z = pole height, all in mm.
+inline TColgp_Array2OfPnt occt_poles(const BSplineSurface& s) {
+    TColgp_Array2OfPnt poles(1, s.nu, 1, s.nv);
+    for (int j = 0; j < s.nv; ++j)
+        for (int i = 0; i < s.nu; ++i)
+            poles.SetValue(i + 1, j + 1,
+                           gp_Pnt(s.pole_u[std::size_t(i)] * mm_per_m, s.pole_v[std::size_t(j)] * mm_per_m,
+                                  s.pole(i, j) * mm_per_m));
+    return poles;
+}
+
+// The twelve edges of the part: the top face's four boundary curves, four vertical
+// edges at the corners, the back face's four lines. Corner vertices are shared.
+struct PartEdges {
+    TopoDS_Edge top_y0, top_y1, top_x0, top_x1;  // top boundary, at v = min / max, u = min / max
+    TopoDS_Edge up00, up10, up01, up11;          // back corner → top corner
+    TopoDS_Edge back_y0, back_y1, back_x0, back_x1;
+    double s0 = 0, s1 = 0, t0 = 0, t1 = 0;       // the top surface's parameter rectangle (mm)
+    double x0 = 0, x1 = 0, y0 = 0, y1 = 0, zb = 0;  // the walls' planes and the back's (mm)
+};
+
+// The boundary curves are made from the boundary rows of poles with the same knots: a
+// clamped spline's edge is exactly the spline curve of its edge poles, and each lies in a
+// wall's plane, which goes through those poles (x = pole_u[0] etc.; the knot bound up to
+// rounding). Each curve's parameter is the surface parameter along it.
+inline PartEdges part_edges(const TColgp_Array2OfPnt& poles, const Knots& ku, const Knots& kv, double back_mm) {
+    const int nu = poles.UpperRow(), nv = poles.UpperCol();
+    const auto row_curve = [&](bool along_u, int index) {
+        const int n = along_u ? nu : nv;
+        TColgp_Array1OfPnt p(1, n);
+        for (int k = 1; k <= n; ++k) p.SetValue(k, along_u ? poles.Value(k, index) : poles.Value(index, k));
+        const Knots& kk = along_u ? ku : kv;
+        return Handle(Geom_BSplineCurve)(
+            new Geom_BSplineCurve(p, occt_reals(kk.values), occt_ints(kk.mults), BSplineSurface::degree));
+    };
+    PartEdges e;
+    e.s0 = ku.values.front(), e.s1 = ku.values.back(), e.t0 = kv.values.front(), e.t1 = kv.values.back();
+    e.x0 = poles.Value(1, 1).X(), e.x1 = poles.Value(nu, 1).X(), e.y0 = poles.Value(1, 1).Y();
+    e.y1 = poles.Value(1, nv).Y(), e.zb = back_mm;
+    // Corner vertices: top (the corner poles, where a clamped spline passes) and back.
+    const auto vertex = [](const gp_Pnt& p) { return BRepBuilderAPI_MakeVertex(p).Vertex(); };
+    const TopoDS_Vertex p00 = vertex(poles.Value(1, 1)), p10 = vertex(poles.Value(nu, 1)),
+                        p01 = vertex(poles.Value(1, nv)), p11 = vertex(poles.Value(nu, nv));
+    const TopoDS_Vertex b00 = vertex(gp_Pnt(e.x0, e.y0, e.zb)), b10 = vertex(gp_Pnt(e.x1, e.y0, e.zb)),
+                        b01 = vertex(gp_Pnt(e.x0, e.y1, e.zb)), b11 = vertex(gp_Pnt(e.x1, e.y1, e.zb));
+    const auto curve_edge = [](const Handle(Geom_BSplineCurve)& c, const TopoDS_Vertex& a, const TopoDS_Vertex& b,
+                               double from, double to) {
+        BRepBuilderAPI_MakeEdge m(c, a, b, from, to);
+        if (!m.IsDone()) throw Standard_Failure("boundary edge");
+        return m.Edge();
+    };
+    const auto line_edge = [](const TopoDS_Vertex& a, const TopoDS_Vertex& b) {
+        BRepBuilderAPI_MakeEdge m(a, b);
+        if (!m.IsDone()) throw Standard_Failure("straight edge");
+        return m.Edge();
+    };
+    e.top_y0 = curve_edge(row_curve(true, 1), p00, p10, e.s0, e.s1);
+    e.top_y1 = curve_edge(row_curve(true, nv), p01, p11, e.s0, e.s1);
+    e.top_x0 = curve_edge(row_curve(false, 1), p00, p01, e.t0, e.t1);
+    e.top_x1 = curve_edge(row_curve(false, nu), p10, p11, e.t0, e.t1);
+    e.up00 = line_edge(b00, p00), e.up10 = line_edge(b10, p10), e.up01 = line_edge(b01, p01);
+    e.up11 = line_edge(b11, p11);
+    e.back_y0 = line_edge(b00, b10), e.back_y1 = line_edge(b01, b11), e.back_x0 = line_edge(b00, b01);
+    e.back_x1 = line_edge(b10, b11);
+    return e;
+}
+
+// Top face: the whole parameter rectangle, outer wire counter-clockwise in (s, t) (seen
+// from +z, where the surface normal S_s × S_t points since x = s, y = t), with the
+// parameter-space lines as the edges' curves on the surface.
+inline TopoDS_Face top_face(const Handle(Geom_BSplineSurface)& surface, const PartEdges& e) {
+    BRep_Builder builder;
+    TopoDS_Face top;
+    builder.MakeFace(top, surface, Precision::Confusion());
+    const Handle(Geom2d_Line) on_t0 = new Geom2d_Line(gp_Pnt2d(0, e.t0), gp_Dir2d(1, 0));
+    const Handle(Geom2d_Line) on_t1 = new Geom2d_Line(gp_Pnt2d(0, e.t1), gp_Dir2d(1, 0));
+    const Handle(Geom2d_Line) on_s0 = new Geom2d_Line(gp_Pnt2d(e.s0, 0), gp_Dir2d(0, 1));
+    const Handle(Geom2d_Line) on_s1 = new Geom2d_Line(gp_Pnt2d(e.s1, 0), gp_Dir2d(0, 1));
+    builder.UpdateEdge(e.top_y0, on_t0, top, Precision::Confusion());
+    builder.UpdateEdge(e.top_y1, on_t1, top, Precision::Confusion());
+    builder.UpdateEdge(e.top_x0, on_s0, top, Precision::Confusion());
+    builder.UpdateEdge(e.top_x1, on_s1, top, Precision::Confusion());
+    TopoDS_Wire wire;
+    builder.MakeWire(wire);
+    builder.Add(wire, e.top_y0);
+    builder.Add(wire, e.top_x1);
+    builder.Add(wire, e.top_y1.Reversed());
+    builder.Add(wire, e.top_x0.Reversed());
+    wire.Closed(true);
+    builder.Add(top, wire);
+    return top;
+}
+
+// A planar face with the outward normal `out`, bounded by four edges (any order and
+// direction: the wire builder chains them, and MakeFace orients the wire to bound the
+// finite region, so the face's normal stays the plane's).
+inline TopoDS_Face plane_face(const gp_Pnt& at, const gp_Dir& out, const TopoDS_Edge& a, const TopoDS_Edge& b,
+                              const TopoDS_Edge& c, const TopoDS_Edge& d) {
+    BRepBuilderAPI_MakeWire w;
+    for (const TopoDS_Edge* e : {&a, &b, &c, &d}) w.Add(*e);
+    if (!w.IsDone()) throw Standard_Failure("wall wire");
+    BRepBuilderAPI_MakeFace f(gp_Pln(at, out), w.Wire(), Standard_True);
+    if (!f.IsDone()) throw Standard_Failure("wall face");
+    TopoDS_Face face = f.Face();
+    TopTools_ListOfShape edges;
+    for (TopExp_Explorer x(face, TopAbs_EDGE); x.More(); x.Next()) edges.Append(x.Current());
+    BRepLib::BuildPCurveForEdgesOnPlane(edges, face);  // stored, not recomputed by every reader
+    return face;
+}
+
+// The closed solid: the spline face, four walls, the back; its shell built from shared
+// edges, so no sewing is needed.
+inline TopoDS_Solid closed_part(const BSplineSurface& s, double back_w) {
+    const TColgp_Array2OfPnt poles = occt_poles(s);
+    const Knots ku = distinct_knots(s.knots_u), kv = distinct_knots(s.knots_v);
+    const Handle(Geom_BSplineSurface) surface =
+        new Geom_BSplineSurface(poles, occt_reals(ku.values), occt_reals(kv.values), occt_ints(ku.mults),
+                                occt_ints(kv.mults), BSplineSurface::degree, BSplineSurface::degree);
+    const PartEdges e = part_edges(poles, ku, kv, back_w * mm_per_m);
+    const TopoDS_Face faces[6] = {
+        top_face(surface, e),
+        plane_face(gp_Pnt(0, e.y0, 0), gp_Dir(0, -1, 0), e.top_y0, e.up10, e.back_y0, e.up00),
+        plane_face(gp_Pnt(0, e.y1, 0), gp_Dir(0, 1, 0), e.top_y1, e.up11, e.back_y1, e.up01),
+        plane_face(gp_Pnt(e.x0, 0, 0), gp_Dir(-1, 0, 0), e.top_x0, e.up01, e.back_x0, e.up00),
+        plane_face(gp_Pnt(e.x1, 0, 0), gp_Dir(1, 0, 0), e.top_x1, e.up11, e.back_x1, e.up10),
+        plane_face(gp_Pnt(0, 0, e.zb), gp_Dir(0, 0, -1), e.back_y0, e.back_x1, e.back_y1, e.back_x0)};
+    BRep_Builder builder;
+    TopoDS_Shell shell;
+    builder.MakeShell(shell);
+    for (const TopoDS_Face& f : faces) builder.Add(shell, f);
+    shell.Closed(true);
+    TopoDS_Solid part;
+    builder.MakeSolid(part);
+    builder.Add(part, shell);
+    BRepLib::OrientClosedSolid(part);
+    return part;
+}
+
+// The STEP text (AP214) of `part` (millimetres) with the product name `name`; `path`
+// only names the file in messages.
+inline std::string step_text(const std::filesystem::path& path, const TopoDS_Solid& part, const std::string& name) {
+    const std::lock_guard<std::mutex> lock(statics_mutex());
+    const Quiet quiet;
+    STEPControl_Writer writer;  // registers the STEP statics before they are set below
+    Interface_Static::SetCVal("xstep.cascade.unit", "MM");  // the unit of our shape
+    Interface_Static::SetCVal("write.step.unit", "MM");     // the unit the file declares
+    Interface_Static::SetCVal("write.step.schema", "AP214IS");
+    if (writer.Transfer(part, STEPControl_ManifoldSolidBrep) != IFSelect_RetDone)
+        throw IoError("cannot write STEP file '" + path.string() + "': OCCT did not translate the solid" +
+                      quiet.detail());
+    // OCCT names the product after the static write.step.product.name plus a counter
+    // ("name 1"); the one PRODUCT entity gets our name as it is instead (OCCT's writer
+    // quotes it for the file).
+    const Handle(StepData_StepModel) model = writer.Model();
+    const Handle(TCollection_HAsciiString) product_name = new TCollection_HAsciiString(name.c_str());
+    for (int k = 1; k <= model->NbEntities(); ++k)
+        if (const auto product = Handle(StepBasic_Product)::DownCast(model->Value(k)); !product.IsNull()) {
+            product->SetId(product_name);
+            product->SetName(product_name);
+        }
+    // The text is made in memory and written by write_file_atomically (io/file.hpp), not
+    // by OCCT's own Write: a full disk or a file-size limit then gives the system's reason
+    // and the file's name, and never leaves a partial part under the file's name.
+    Handle(StepData_Protocol) protocol = Handle(StepData_Protocol)::DownCast(model->Protocol());
+    if (protocol.IsNull()) protocol = StepAP214::Protocol();
+    StepData_StepWriter step_text(model);
+    step_text.SendModel(protocol);
+    std::ostringstream text;
+    if (!step_text.Print(text))
+        throw IoError("cannot write STEP file '" + path.string() + "': OCCT could not print the model" +
+                      quiet.detail());
+    return text.str();
+}
+
 }  // namespace step_detail
 
 // Writes `s` as one closed solid (see the top of this file) to `path`, replacing the file.
@@ -217,7 +397,6 @@ inline void check_spline(const BSplineSurface& s) {
 // IoError naming the file when OCCT cannot build or write the part.
 inline void write_step(const std::filesystem::path& path, const BSplineSurface& s, const StepSolid& solid) {
     namespace sd = step_detail;
-    constexpr double mm = sd::mm_per_m;
     sd::check_spline(s);
     // A B-spline lies in the convex hull of its poles, so no point of the surface is lower
     // than the lowest pole: a back face below that cannot touch the top face, and the walls
@@ -228,145 +407,14 @@ inline void write_step(const std::filesystem::path& path, const BSplineSurface& 
     if (!std::isfinite(solid.back_w) || !(solid.back_w < lowest))
         throw InputError("STEP export: back_w = " + sd::metres(solid.back_w) +
                          " must lie below the surface's lowest pole at w = " + sd::metres(lowest));
-
+    std::string text;
     try {
-        const int nu = s.nu, nv = s.nv;
-        // --- the top face's surface: x = pole_u, y = pole_v, z = pole height, all in mm.
-        TColgp_Array2OfPnt poles(1, nu, 1, nv);
-        for (int j = 0; j < nv; ++j)
-            for (int i = 0; i < nu; ++i)
-                poles.SetValue(i + 1, j + 1, gp_Pnt(s.pole_u[std::size_t(i)] * mm, s.pole_v[std::size_t(j)] * mm,
-                                                    s.pole(i, j) * mm));
-        const sd::Knots ku = sd::distinct_knots(s.knots_u), kv = sd::distinct_knots(s.knots_v);
-        const Handle(Geom_BSplineSurface) top_surface =
-            new Geom_BSplineSurface(poles, sd::occt_reals(ku.values), sd::occt_reals(kv.values), sd::occt_ints(ku.mults),
-                                    sd::occt_ints(kv.mults), BSplineSurface::degree, BSplineSurface::degree);
-        const double s0 = ku.values.front(), s1 = ku.values.back(), t0 = kv.values.front(), t1 = kv.values.back();
-
-        // The boundary curves, made from the boundary rows of poles with the same knots: a
-        // clamped spline's edge is exactly the spline curve of its edge poles. Each lies in a
-        // wall's plane, which goes through those poles (x = pole_u[0] etc.; equal to the
-        // knot bound up to rounding).
-        const auto row_curve = [&](bool along_u, int index) {
-            const int n = along_u ? nu : nv;
-            TColgp_Array1OfPnt p(1, n);
-            for (int k = 0; k < n; ++k) p.SetValue(k + 1, along_u ? poles.Value(k + 1, index + 1) : poles.Value(index + 1, k + 1));
-            const sd::Knots& kk = along_u ? ku : kv;
-            return Handle(Geom_BSplineCurve)(new Geom_BSplineCurve(p, sd::occt_reals(kk.values), sd::occt_ints(kk.mults),
-                                                                   BSplineSurface::degree));
-        };
-        const double x0 = s.pole_u.front() * mm, x1 = s.pole_u.back() * mm;
-        const double y0 = s.pole_v.front() * mm, y1 = s.pole_v.back() * mm;
-        const double zb = solid.back_w * mm;
-
-        // Corner vertices: top (the corner poles, where a clamped spline passes) and back.
-        const auto vertex = [](const gp_Pnt& p) { return BRepBuilderAPI_MakeVertex(p).Vertex(); };
-        const TopoDS_Vertex p00 = vertex(poles.Value(1, 1)), p10 = vertex(poles.Value(nu, 1)),
-                            p01 = vertex(poles.Value(1, nv)), p11 = vertex(poles.Value(nu, nv));
-        const TopoDS_Vertex b00 = vertex(gp_Pnt(x0, y0, zb)), b10 = vertex(gp_Pnt(x1, y0, zb)),
-                            b01 = vertex(gp_Pnt(x0, y1, zb)), b11 = vertex(gp_Pnt(x1, y1, zb));
-
-        // Top boundary edges; their curve parameter is the surface parameter along them.
-        const auto curve_edge = [](const Handle(Geom_BSplineCurve)& c, const TopoDS_Vertex& a, const TopoDS_Vertex& b,
-                                   double from, double to) {
-            BRepBuilderAPI_MakeEdge e(c, a, b, from, to);
-            if (!e.IsDone()) throw Standard_Failure("boundary edge");
-            return e.Edge();
-        };
-        const TopoDS_Edge top_y0 = curve_edge(row_curve(true, 0), p00, p10, s0, s1);
-        const TopoDS_Edge top_y1 = curve_edge(row_curve(true, nv - 1), p01, p11, s0, s1);
-        const TopoDS_Edge top_x0 = curve_edge(row_curve(false, 0), p00, p01, t0, t1);
-        const TopoDS_Edge top_x1 = curve_edge(row_curve(false, nu - 1), p10, p11, t0, t1);
-        const auto line_edge = [](const TopoDS_Vertex& a, const TopoDS_Vertex& b) {
-            BRepBuilderAPI_MakeEdge e(a, b);
-            if (!e.IsDone()) throw Standard_Failure("straight edge");
-            return e.Edge();
-        };
-        const TopoDS_Edge up00 = line_edge(b00, p00), up10 = line_edge(b10, p10), up01 = line_edge(b01, p01),
-                          up11 = line_edge(b11, p11);
-        const TopoDS_Edge back_y0 = line_edge(b00, b10), back_y1 = line_edge(b01, b11), back_x0 = line_edge(b00, b01),
-                          back_x1 = line_edge(b10, b11);
-
-        // Top face: the whole parameter rectangle, outer wire counter-clockwise in (s, t)
-        // (seen from +z, where the surface normal S_s × S_t points since x = s, y = t), with
-        // the parameter-space lines as the edges' curves on the surface.
-        BRep_Builder builder;
-        TopoDS_Face top;
-        builder.MakeFace(top, top_surface, Precision::Confusion());
-        const Handle(Geom2d_Line) on_t0 = new Geom2d_Line(gp_Pnt2d(0, t0), gp_Dir2d(1, 0));
-        const Handle(Geom2d_Line) on_t1 = new Geom2d_Line(gp_Pnt2d(0, t1), gp_Dir2d(1, 0));
-        const Handle(Geom2d_Line) on_s0 = new Geom2d_Line(gp_Pnt2d(s0, 0), gp_Dir2d(0, 1));
-        const Handle(Geom2d_Line) on_s1 = new Geom2d_Line(gp_Pnt2d(s1, 0), gp_Dir2d(0, 1));
-        builder.UpdateEdge(top_y0, on_t0, top, Precision::Confusion());
-        builder.UpdateEdge(top_y1, on_t1, top, Precision::Confusion());
-        builder.UpdateEdge(top_x0, on_s0, top, Precision::Confusion());
-        builder.UpdateEdge(top_x1, on_s1, top, Precision::Confusion());
-        TopoDS_Wire top_wire;
-        builder.MakeWire(top_wire);
-        builder.Add(top_wire, top_y0);
-        builder.Add(top_wire, top_x1);
-        builder.Add(top_wire, top_y1.Reversed());
-        builder.Add(top_wire, top_x0.Reversed());
-        top_wire.Closed(true);
-        builder.Add(top, top_wire);
-
-        // A planar face with the outward normal `out`, bounded by four edges (any order and
-        // direction: the wire builder chains them, and MakeFace orients the wire to bound
-        // the finite region, so the face's normal stays the plane's).
-        const auto plane_face = [](const gp_Pnt& at, const gp_Dir& out, const TopoDS_Edge& a, const TopoDS_Edge& b,
-                                   const TopoDS_Edge& c, const TopoDS_Edge& d) {
-            BRepBuilderAPI_MakeWire w;
-            for (const TopoDS_Edge* e : {&a, &b, &c, &d}) w.Add(*e);
-            if (!w.IsDone()) throw Standard_Failure("wall wire");
-            BRepBuilderAPI_MakeFace f(gp_Pln(at, out), w.Wire(), Standard_True);
-            if (!f.IsDone()) throw Standard_Failure("wall face");
-            TopoDS_Face face = f.Face();
-            TopTools_ListOfShape edges;
-            for (TopExp_Explorer x(face, TopAbs_EDGE); x.More(); x.Next()) edges.Append(x.Current());
-            BRepLib::BuildPCurveForEdgesOnPlane(edges, face);  // stored, not recomputed by every reader
-            return face;
-        };
-        const TopoDS_Face wall_y0 = plane_face(gp_Pnt(0, y0, 0), gp_Dir(0, -1, 0), top_y0, up10, back_y0, up00);
-        const TopoDS_Face wall_y1 = plane_face(gp_Pnt(0, y1, 0), gp_Dir(0, 1, 0), top_y1, up11, back_y1, up01);
-        const TopoDS_Face wall_x0 = plane_face(gp_Pnt(x0, 0, 0), gp_Dir(-1, 0, 0), top_x0, up01, back_x0, up00);
-        const TopoDS_Face wall_x1 = plane_face(gp_Pnt(x1, 0, 0), gp_Dir(1, 0, 0), top_x1, up11, back_x1, up10);
-        const TopoDS_Face back = plane_face(gp_Pnt(0, 0, zb), gp_Dir(0, 0, -1), back_y0, back_x1, back_y1, back_x0);
-
-        TopoDS_Shell shell;
-        builder.MakeShell(shell);
-        for (const TopoDS_Face& f : {top, wall_y0, wall_y1, wall_x0, wall_x1, back}) builder.Add(shell, f);
-        shell.Closed(true);
-        TopoDS_Solid part;
-        builder.MakeSolid(part);
-        builder.Add(part, shell);
-        BRepLib::OrientClosedSolid(part);
-
-        const std::lock_guard<std::mutex> lock(sd::statics_mutex());
-        const sd::Quiet quiet;
-        STEPControl_Writer writer;  // registers the STEP statics before they are set below
-        Interface_Static::SetCVal("xstep.cascade.unit", "MM");  // the unit of our shape
-        Interface_Static::SetCVal("write.step.unit", "MM");     // the unit the file declares
-        Interface_Static::SetCVal("write.step.schema", "AP214IS");
-        if (writer.Transfer(part, STEPControl_ManifoldSolidBrep) != IFSelect_RetDone)
-            throw IoError("cannot write STEP file '" + path.string() + "': OCCT did not translate the solid" +
-                          quiet.detail());
-        // OCCT names the product after the static write.step.product.name plus a counter
-        // ("name 1"); the one PRODUCT entity gets our name as it is instead (OCCT's writer
-        // quotes it for the file).
-        const Handle(StepData_StepModel) model = writer.Model();
-        const Handle(TCollection_HAsciiString) name = new TCollection_HAsciiString(solid.name.c_str());
-        for (int k = 1; k <= model->NbEntities(); ++k)
-            if (const auto product = Handle(StepBasic_Product)::DownCast(model->Value(k)); !product.IsNull()) {
-                product->SetId(name);
-                product->SetName(name);
-            }
-        if (writer.Write(path.string().c_str()) != IFSelect_RetDone)
-            throw IoError("cannot write STEP file '" + path.string() + "': the file could not be created or written" +
-                          quiet.detail());
+        text = sd::step_text(path, sd::closed_part(s, solid.back_w), solid.name);
     } catch (const Standard_Failure& e) {
         throw IoError("cannot write STEP file '" + path.string() + "': OCCT failed building the part (" +
                       e.GetMessageString() + ")");
     }
+    write_file_atomically(path, text);
 }
 
 // A STEP part read back through OCCT, with the checks and the samplers an exported part is

@@ -155,8 +155,8 @@ struct OptimiseSpec {
     double export_tolerance = 0.05;   // "auto": light of a facet lands within this many receiver
                                       // cells of where the simulated patch sends it
     std::int64_t export_max_triangles = 2'000'000;  // "auto": k no larger than this allows
-    // What a design writes, the first leading its summary; empty: "auto" (the mesh, and
-    // STEP in builds with Open CASCADE).
+    // What a design writes, the first leading its summary; empty: "auto" (STEP and the
+    // mesh in builds with Open CASCADE, the mesh alone otherwise; io/forms.hpp).
     std::vector<ExportFormat> export_formats;
     std::int64_t progress_every = 2000;
 };
