@@ -21,25 +21,15 @@
 #include <freeform/io/step.hpp>
 #include <freeform/surface/bspline.hpp>
 
+#include "files.hpp"
 #include "support.hpp"
 
 using namespace freeform;
 
 namespace {
 
-struct TempDir {
-    std::filesystem::path path;
-    TempDir() {
-        std::random_device entropy;
-        const auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
-        path = std::filesystem::temp_directory_path() /
-               ("freeform_test_step_" + std::to_string(stamp) + "_" + std::to_string(entropy()));
-        std::filesystem::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        std::filesystem::remove_all(path, ec);
-    }
+struct TempDir : testing::TempDir {
+    TempDir() : testing::TempDir("freeform_test_step_") {}
 };
 
 // A tilted paraboloid with a ripple: curved in both directions, no symmetry that could

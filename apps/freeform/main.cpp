@@ -473,7 +473,7 @@ void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d
             staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
             continue;
         }
-        const char* name = format == ExportFormat::step ? "surface.step" : "surface.dat";
+        const char* name = io::export_file_name(format);
         phase(std::string("writing ") + name + ", reading it back and tracing it");
         staged.write(name, [&](const fs::path& f) {
             io::FormCheck fc = io::write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline,
@@ -490,7 +490,6 @@ void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d
         });
     }
     if (!shown && d.exported.cells) {
-        m["error_physical_form"] = "mesh";
         shown = d.exported.cells;
         shown_what = "the cell means of surface.obj, traced as flat triangles";
     }
@@ -503,9 +502,13 @@ void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d
     staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
     staged.write("comparison.png",
                  [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
-    json formats_json = json::array();
-    for (const ExportFormat format : formats) formats_json.push_back(std::string(to_string(format)));
+    json formats_json = json::array(), files_json = json::array();
+    for (const ExportFormat format : formats) {
+        formats_json.push_back(std::string(to_string(format)));
+        files_json.push_back(io::export_file_name(format));
+    }
     m["export"]["formats"] = formats_json;
+    m["export"]["files"] = files_json;
     m["export"]["images_show"] = shown_what;
     staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
     staged.commit("metrics.json");
@@ -590,10 +593,7 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
     if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
     std::printf("\n");
     std::string files;
-    for (const json& f : m["export"]["formats"]) {
-        const std::string name = f.get<std::string>();
-        files += name == "mesh" ? ", surface.obj/.stl" : name == "step" ? ", surface.step" : ", surface.dat";
-    }
+    for (const json& f : m["export"]["files"]) files += ", " + f.get<std::string>();
     std::printf("  results in %s/ (metrics.json, comparison.png%s, heightmap.pfm)\n", out.string().c_str(),
                 files.c_str());
 }
@@ -836,7 +836,7 @@ void export_mesh(const ExportArgs& a, ExportFile kind, const Scene& scene, const
                 fab.tolerance_met ? "" : ": MISSED within optimise.export_max_triangles");
 #if defined(FREEFORM_WITH_EMBREE)
     if (!target) return;
-    const CellMeans c = exported_cell_means(exec::omp_t{a.threads}, scene, hm, exported_geometry(scene, hm, fab),
+    const CellMeans c = exported_cell_means(exec::omp_t{a.threads}, scene, hm, exported_geometry(scene, hm, fab.subdivisions),
                                             &*target, physical_cell_mean_options(scene.optimise.seed));
     std::printf("  error_physical %.4f: the facets traced as flat triangles, %.0f rays per cell\n", c.error,
                 c.rays_per_cell);

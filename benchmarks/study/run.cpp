@@ -305,7 +305,7 @@ int run(const Args& a) {
         Scene fab_scene = judge;
         fab_scene.surface.phong_alpha = alpha;
         const Fabrication fab = make_fabrication(fab_scene, result_surface);
-        const ExportedGeometry geometry = exported_geometry(fab_scene, result_surface, fab);
+        const ExportedGeometry geometry = exported_geometry(fab_scene, result_surface, fab.subdivisions);
         const RaySet rays = generate_rays(judge.light, result_surface, judge.receiver, eval_seed);
         const ExportedTrace e = trace_exported(exec::omp_t{a.threads}, judge, geometry, rays);
         out["final"]["error_exported"] =

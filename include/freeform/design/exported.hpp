@@ -17,7 +17,6 @@
 #include "../trace/embree.hpp"
 #include "../trace/setup.hpp"
 #include "cell_means.hpp"
-#include "fabrication.hpp"
 
 namespace freeform {
 
@@ -44,13 +43,6 @@ inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& s
     return {tessellate_surface(surface, alpha, subdivisions, false), std::nullopt};
 }
 
-// The exported part of a Fabrication (its per-cell levels), in the surface frame.
-inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, const Fabrication& fab) {
-    ExportedGeometry g{fabrication_mesh(scene, surface, fab, false), std::nullopt};
-    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) g.solid_ior = lens->ior;
-    return g;
-}
-
 // A smooth form of the design (`point` as in detail::tessellate_local: a fitted spline,
 // the re-read STEP part) tessellated with k × k facet pairs per cell over `grid`'s active
 // cells, its vertex normals those of the form. Traced with interpolated normals, the
@@ -62,10 +54,7 @@ ExportedGeometry smooth_geometry(const Scene& scene, const Heightmap& grid, int 
     g.smooth = true;
     if (const Lens* lens = std::get_if<Lens>(&scene.surface.material)) {
         g.mesh = lens_solid_of(grid, *lens, k, point, true, false);
-        std::int64_t cells = 0;
-        for (int j = 0; j + 1 < grid.ny(); ++j)
-            for (int i = 0; i + 1 < grid.nx(); ++i) cells += grid.cell_active(i, j) ? 1 : 0;
-        g.smooth_triangles = 2 * std::int64_t(k) * k * cells;
+        g.smooth_triangles = 2 * std::int64_t(k) * k * active_cell_count(grid);
         g.solid_ior = lens->ior;
     } else {
         detail::check_export_args(grid, 0.0, k);

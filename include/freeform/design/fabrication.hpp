@@ -69,21 +69,9 @@ inline constexpr int max_auto_subdivisions = 16;
 
 // The largest k whose mesh stays within `max_triangles` (at least 1).
 inline int subdivisions_for_triangles(const Heightmap& surface, std::int64_t max_triangles) {
-    std::int64_t cells = 0;
-    for (int j = 0; j + 1 < surface.ny(); ++j)
-        for (int i = 0; i + 1 < surface.nx(); ++i) cells += surface.cell_active(i, j) ? 1 : 0;
+    const std::int64_t cells = active_cell_count(surface);
     if (cells == 0) return 1;
     return std::max(1, int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))));
-}
-
-// The mesh of a Fabrication, in the world frame or, with world_frame false, in the
-// surface frame (for tracing it).
-inline TriangleMesh fabrication_mesh(const Scene& scene, const Heightmap& surface, const Fabrication& f,
-                                     bool world_frame) {
-    const auto alpha = float(scene.surface.phong_alpha);
-    if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
-        return lens_solid(surface, *lens, alpha, f.subdivisions, world_frame);
-    return tessellate_surface(surface, alpha, f.subdivisions, world_frame);
 }
 
 inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface) {
@@ -102,7 +90,10 @@ inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface
         f.normal_error = tessellation_normal_error(surface, alpha, f.subdivisions, 0.9);
     }
     f.tolerance_met = f.normal_error <= f.normal_tolerance;
-    f.mesh = fabrication_mesh(scene, surface, f, true);
+    if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
+        f.mesh = lens_solid(surface, *lens, float(alpha), f.subdivisions);
+    else
+        f.mesh = tessellate_surface(surface, float(alpha), f.subdivisions);
     return f;
 }
 

@@ -155,7 +155,7 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
     c.spline_fit = check_spline_fit(c.spline, surface, scene.surface.phong_alpha, spline_samples_per_cell);
     c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(scene.optimise.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)
-    const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication);
+    const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
     const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted.rays);
     c.error_exported = l1_error(et.histogram, fitted.target);
     c.energy_exported = et.totals.energy();

@@ -41,6 +41,11 @@ struct FormCheck {
     std::string valid = "yes";      // the file's own check (STEP: BRepCheck_Analyzer)
 };
 
+// The file(s) a design writes for `f`.
+inline const char* export_file_name(ExportFormat f) {
+    return f == ExportFormat::mesh ? "surface.obj/.stl" : f == ExportFormat::step ? "surface.step" : "surface.dat";
+}
+
 // Whether a build can write `f`.
 inline bool format_available(ExportFormat f) {
 #if defined(FREEFORM_WITH_OCCT)

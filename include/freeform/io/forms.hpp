@@ -46,6 +46,44 @@ void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const Image
 
 }  // namespace forms_detail
 
+namespace forms_detail {
+
+// Writes the smooth form `format` of `spline` to `file`.
+inline void write_form(ExportFormat format, const std::filesystem::path& file, const Scene& scene,
+                       const BSplineSurface& spline) {
+    if (format == ExportFormat::sag) return write_grid_sag(file, spline);
+#if defined(FREEFORM_WITH_OCCT)
+    const auto* lens = std::get_if<Lens>(&scene.surface.material);
+    const double back =
+        lens ? -lens->thickness : *std::min_element(spline.z.begin(), spline.z.end()) - mirror_step_thickness;
+    write_step(file, spline, StepSolid{back, scene.name.empty() ? "freeform surface" : scene.name});
+#else
+    (void)file, (void)scene, (void)spline;
+    throw InputError("surface.step needs a build with Open CASCADE (libocct-*-dev; see README)");
+#endif
+}
+
+// Reads `file` back and judges what it holds.
+inline void check_form(FormCheck& fc, const Scene& scene, const Heightmap& grid, const ImageD* target, int threads) {
+    if (fc.format == ExportFormat::sag) {
+        const GridSag g = read_grid_sag(fc.file);
+        return judge(fc, scene, grid, target, threads, [&](double u, double v) {
+            const SplineSample q = g.eval(u, v);
+            return PhongVertex{{u, v, q.z}, q.normal()};
+        });
+    }
+#if defined(FREEFORM_WITH_OCCT)
+    const StepPart part = read_step(fc.file);
+    fc.valid = !part.is_valid()             ? "no: BRepCheck_Analyzer finds the shape invalid"
+               : part.solid_count() != 1    ? "no: " + std::to_string(part.solid_count()) + " solids"
+               : !part.closed()             ? "no: the shell is open"
+                                            : "yes";
+    judge(fc, scene, grid, target, threads, [&](double u, double v) { return part.sample_m(u, v); });
+#endif
+}
+
+}  // namespace forms_detail
+
 // Writes `format` (step or sag) of the design whose surface is `grid` and whose fitted
 // spline is `spline` to `file`, reads the file back, and judges it against `target`
 // (when given and the build has Embree). Throws IoError when the file cannot be written
@@ -53,52 +91,22 @@ void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const Image
 inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem::path& file, const Scene& scene,
                                       const Heightmap& grid, const BSplineSurface& spline, const ImageD* target,
                                       int threads) {
+    if (format == ExportFormat::mesh)
+        throw InputError("write_and_check_form: the mesh is written by io::write_obj / write_stl");
     FormCheck fc;
     fc.format = format;
     fc.file = file;
-    const auto t0 = std::chrono::steady_clock::now();
     const auto since = [](std::chrono::steady_clock::time_point t) {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
     };
-    if (format == ExportFormat::sag) {
-        write_grid_sag(file, spline);
-        fc.write_seconds = since(t0);
-        fc.bytes = std::filesystem::file_size(file);
-        const auto t1 = std::chrono::steady_clock::now();
-        const GridSag g = read_grid_sag(file);
-        forms_detail::judge(fc, scene, grid, target, threads, [&](double u, double v) {
-            const SplineSample q = g.eval(u, v);
-            return PhongVertex{{u, v, q.z}, q.normal()};
-        });
-        fc.check_seconds = since(t1);
-        return fc;
-    }
-    if (format == ExportFormat::step) {
-#if defined(FREEFORM_WITH_OCCT)
-        double back = 0;
-        if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
-            back = -lens->thickness;
-        else
-            back = *std::min_element(spline.z.begin(), spline.z.end()) - mirror_step_thickness;
-        write_step(file, spline, StepSolid{back, scene.name.empty() ? "freeform surface" : scene.name});
-        fc.write_seconds = since(t0);
-        fc.bytes = std::filesystem::file_size(file);
-        const auto t1 = std::chrono::steady_clock::now();
-        const StepPart part = read_step(file);
-        fc.valid = !part.is_valid() ? "no: BRepCheck_Analyzer finds the shape invalid"
-                   : part.solid_count() != 1 ? "no: " + std::to_string(part.solid_count()) + " solids"
-                   : !part.closed() ? "no: the shell is open"
-                                    : "yes";
-        forms_detail::judge(fc, scene, grid, target, threads, [&](double u, double v) {
-            return PhongVertex{part.point_m(u, v), part.normal(u, v)};
-        });
-        fc.check_seconds = since(t1);
-        return fc;
-#else
-        throw InputError("surface.step needs a build with Open CASCADE (libocct-*-dev; see README)");
-#endif
-    }
-    throw InputError("write_and_check_form: the mesh is written by io::write_obj / write_stl");
+    const auto t0 = std::chrono::steady_clock::now();
+    forms_detail::write_form(format, file, scene, spline);
+    fc.write_seconds = since(t0);
+    fc.bytes = std::filesystem::file_size(file);
+    const auto t1 = std::chrono::steady_clock::now();
+    forms_detail::check_form(fc, scene, grid, target, threads);
+    fc.check_seconds = since(t1);
+    return fc;
 }
 
 }  // namespace freeform::io

@@ -150,6 +150,7 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
         m["energy_exported"] = *c.energy_exported;
         exported["l1_to_design_irradiance"] = *c.l1_to_design;
         m["error_physical"] = c.cells->error;
+        m["error_physical_form"] = "mesh";  // the CLI makes it the leading form's (io/forms.hpp)
         m["energy_physical"] = c.cells->totals.energy();
         m["cell_means"] = cell_means_json(*c.cells, "the exported surface.obj traced as flat triangles");
     } else {

@@ -465,15 +465,14 @@ struct StepPart {
     // rounding; a few Newton steps on (x, y)(s, t) = 1000 (u, v) make it so for the
     // re-read poles as they are, so the height returned is the file's height at exactly
     // (u, v) even if a reader or another writer moved the poles sideways.
-    Vec3d point_m(double u, double v) const {
-        double s = 0, t = 0;
-        const gp_Pnt p = locate(u, v, s, t);
-        return Vec3d{p.X(), p.Y(), p.Z()} / step_detail::mm_per_m;
-    }
+    Vec3d point_m(double u, double v) const { return sample_m(u, v).position; }
 
     // The unit normal of the re-read top surface at the point point_m(u, v) returns,
     // facing +z (S_s × S_t, flipped if needed).
-    Vec3d normal(double u, double v) const {
+    Vec3d normal(double u, double v) const { return sample_m(u, v).normal; }
+
+    // Both at once (one search for the parameters): what a tessellation of the part needs.
+    PhongVertex sample_m(double u, double v) const {
         double s = 0, t = 0;
         locate(u, v, s, t);
         gp_Pnt p;
@@ -481,7 +480,7 @@ struct StepPart {
         top->D1(s, t, p, ds, dt);
         const gp_Vec n = ds.Crossed(dt);
         const Vec3d out = normalize(Vec3d{n.X(), n.Y(), n.Z()});
-        return out.z < 0 ? -out : out;
+        return {Vec3d{p.X(), p.Y(), p.Z()} / step_detail::mm_per_m, out.z < 0 ? -out : out};
     }
 
 private:

@@ -148,6 +148,14 @@ inline SubdivisionChoice subdivisions_for_tolerance(const Heightmap& hm, double 
     }
 }
 
+// The cells inside the aperture: the ones an exported mesh covers.
+inline std::int64_t active_cell_count(const Heightmap& hm) {
+    std::int64_t cells = 0;
+    for (int j = 0; j + 1 < hm.ny(); ++j)
+        for (int i = 0; i + 1 < hm.nx(); ++i) cells += hm.cell_active(i, j) ? 1 : 0;
+    return cells;
+}
+
 namespace detail {
 
 inline void check_export_args(const Heightmap& hm, double phong_alpha, int subdivisions) {
