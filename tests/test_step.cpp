@@ -219,7 +219,7 @@ TEST_CASE("STEP export of a 513 x 513 grid: size and time") {
     const double megabytes = double(std::filesystem::file_size(file)) / 1e6;
     MESSAGE("513 x 513 grid (515 x 515 poles): write_step " << seconds << " s, " << megabytes << " MB");
     CHECK(megabytes < 50);
-    CHECK(seconds < 20);
+    // The time is reported, not asserted: speed is measured in benchmarks/, not tests.
 
     // Read back (a few seconds): still one closed solid with the spline's heights.
     const io::StepPart part = io::read_step(file);
