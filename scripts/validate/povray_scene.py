@@ -24,8 +24,8 @@ Choices, and why (docs: README "Independent validation"):
 - The receiver is a diffuse plane (ambient 0, diffuse 1, no specular/phong) that collects
   photons. It sits in a `light_group` with `global_lights off`, so the light does not
   illuminate it directly (freeform records only light that has left the surface); photons
-  still land on it. The light is placed between the surface and the receiver (DESIGN.md:
-  the receiver is transparent to the incoming light); a parallel light's photons start at
+  still land on it. The light is placed between the surface and the receiver (docs/architecture.md
+  §1: the receiver is transparent to the incoming light); a parallel light's photons start at
   its position, so the receiver never shadows them.
 - An orthographic camera on the receiver's front looks along -normal; its `right` and `up`
   are the receiver's u and v axes times its size, so it frames exactly the receiver
