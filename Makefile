@@ -10,8 +10,9 @@
 #                       build/fuzz/artifacts/<reader>/, non-zero exit if any (docs/fuzzing.md)
 #   make bench [QUICK=1]  micro-benchmarks (JSON in benchmarks/results) + speed/accuracy study
 #                         (benchmarks/results/REPORT.md; the full study takes about 1 h 50 min on
-#                         2 cores and reuses the runs in benchmarks/results/runs, the committed ones
-#                         included; STUDY_ARGS=--fresh measures every run again)
+#                         2 cores and reuses the runs in benchmarks/results/runs (one .json.gz
+#                         per run), the committed ones included; STUDY_ARGS=--fresh measures
+#                         every run again)
 #   make validate       independent check with POV-Ray 3.7 photon mapping: designs E, F, L, the
 #                       headlight, E in sunlight, L with Fresnel losses, renders them in POV-Ray,
 #                       compares (benchmarks/results/validation.md;

@@ -3,8 +3,9 @@
 
   tables.py [--trace benchmarks/results/trace.json] [--incremental benchmarks/results/incremental.json]
 
-The README's performance tables are this script's output (with the machine line it
-prints first), so that every figure there comes from a file `make bench` writes.
+The tables of docs/performance.md ("Tracing" and "Incremental evaluation") and
+benchmarks/results/micro.md are this script's output (with the machine line it prints
+first), so that every figure there comes from a file `make bench` writes.
 Ratios (incremental / full retrace) are taken within one file, i.e. one run.
 """
 from __future__ import annotations

@@ -2,9 +2,10 @@
 """Error against wall-time budget for each ranks x threads configuration, from the
 runs.csv files that benchmarks/mpi/study.py writes (any number of them, any budgets).
 
-    /usr/bin/python3 benchmarks/mpi/plot.py --out benchmarks/results/mpi_domains/error_vs_time.png \
-        benchmarks/results/mpi_domains/c10/runs.csv benchmarks/results/mpi_domains/c30/runs.csv \
-        benchmarks/results/mpi_domains/ranks124_40s/runs.csv
+    /usr/bin/python3 benchmarks/mpi/plot.py --out OUT/error_vs_time.png \
+        OUT/c10/runs.csv OUT/c30/runs.csv OUT/ranks124_40s/runs.csv
+
+(OUT/c10 etc.: the folders given to benchmarks/mpi/study.py --out.)
 
 One panel per scene; for each configuration the median over seeds at each budget, with
 a bar from the lowest to the highest seed. Configurations are told apart by ranks,

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# The Phong alpha scan behind the default surface.phong_alpha = 1/2 (README, "What gets
-# milled"): each case's transport start (`freeform design --start-only`) at several
-# alphas; prints case, alpha, the design's error, the exported mesh's error and the
-# subdivision k chosen for the export.
+# The Phong alpha scan behind the default surface.phong_alpha = 1/2 (docs/export.md, "The
+# simulated surface is the exported surface"): each case's transport start
+# (`freeform design --start-only`) at several alphas; prints case, alpha, the design's
+# error, the exported mesh's error and the subdivision k chosen for the export.
 #   benchmarks/study/alpha_scan.sh [BIN]     (BIN: default build/release/bin/freeform)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/../.."

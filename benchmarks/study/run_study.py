@@ -8,7 +8,10 @@ then aggregates, plots and writes REPORT.md (see benchmarks/study/README.md).
   run_study.py --report-only    re-aggregate the runs already on disk
 
 Runs are sequential (each with --threads, recorded) and resumable: a run whose result file
-exists with the same configuration is not repeated (--fresh repeats everything).
+exists with the same configuration is not repeated (--fresh repeats everything). Each run's
+result is OUT/runs/<case>/<method>/b<B>-s<S>.json.gz (study_run's JSON with a "study" block,
+gzip-compressed, the same bytes for the same result: run_files.py); plain .json runs of an
+earlier checkout are read and reused as well.
 Use /usr/bin/python3 (Debian's matplotlib).
 """
 from __future__ import annotations
@@ -30,12 +33,14 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
+import run_files  # noqa: E402
 import study_plan as plan  # noqa: E402
 
 # Seconds per run on top of its budget (start-up, target rendering, the final renders and
 # error_physical), measured on the 2-core development machine; the camera case traces 512
 # rays per cell for error_physical, and under grazing light our designer overshoots its budget
-# (each full trace of the incremental index takes seconds there: README, "Performance").
+# (each full trace of the incremental index takes seconds there: docs/performance.md, "The
+# speed/accuracy study").
 OVERHEAD = {"camera": 10.0, "grazing": 14.0, "headlight": 3.0}
 DEFAULT_OVERHEAD = 8.0
 
@@ -118,10 +123,10 @@ def estimate(runs: list[plan.Run]) -> float:
 def median_iterations(out_dir: Path, case: str) -> int | None:
     """The median iterations of ours' runs at the case's budget on disk (purpose main)."""
     its = []
-    for f in sorted((out_dir / "runs" / case / "ours").glob("*.json")):
+    for f in run_files.files(out_dir / "runs" / case / "ours", recursive=False):
         try:
-            res = json.loads(f.read_text())
-        except (OSError, json.JSONDecodeError):
+            res = run_files.read(f)
+        except (OSError, ValueError):
             continue
         if res.get("study", {}).get("purpose") == "main" and "iterations" in res:
             its.append(int(res["iterations"]))
@@ -220,9 +225,12 @@ def main() -> int:
             this = {k: meta.get(k) for k in PASS_KEYS} | {"finished": now, "interrupted": not finished}
             meta["passes"] = passes + [this]
             meta_file.write_text(json.dumps(meta, indent=1) + "\n")
+        runs_dir = out_dir / "runs"
         for k, r in enumerate(runs):
             method = plan.METHODS[r.method]
-            out_file = out_dir / "runs" / (r.key + ".json")
+            # study_run writes plain JSON to a temporary file beside the result (*.tmp: ignored by
+            # git and by the readers); what is kept is the .json.gz that run_files.write makes of it.
+            out_file = runs_dir / (r.key + ".json.tmp")
             image_prefix = out_dir / "images" / f"{r.case}-{r.method}" if r.save_images else None
             if method.engine in unavailable:
                 continue
@@ -236,26 +244,31 @@ def main() -> int:
                 print(f"  {r.case}: fixed iteration count {n} (median of ours' main runs)", flush=True)
             cmd = run_command(binary, r, args.threads, out_file, image_prefix)
             cfg = config_of(cmd)
-            if out_file.exists() and not args.fresh:
+            stored = run_files.existing(runs_dir, r.key)
+            if stored is not None and not args.fresh:
                 try:
-                    old = json.loads(out_file.read_text())
+                    old = run_files.read(stored)
                     if old.get("study", {}).get("config") == cfg and (image_prefix is None or Path(
                             str(image_prefix) + "-irradiance.pfm").exists()):
                         skipped += 1
                         continue
-                except (OSError, json.JSONDecodeError):
+                except (OSError, ValueError):
                     pass
             elapsed = time.monotonic() - start
             left = estimate(runs[k:])
             print(f"[{k + 1}/{len(runs)} {fmt_duration(elapsed)} elapsed, ~{fmt_duration(left)} left] {r.key}",
                   flush=True)
             timeout = 3 * plan.expected_seconds(r) + 180
+            out_file.unlink(missing_ok=True)
             try:
                 p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
             except subprocess.TimeoutExpired:
+                out_file.unlink(missing_ok=True)
                 failed.append({"run": r.key, "why": f"timed out after {timeout:.0f} s"})
                 print(f"  timed out after {timeout:.0f} s", flush=True)
                 continue
+            if p.returncode != 0:
+                out_file.unlink(missing_ok=True)
             if p.returncode == 3:
                 unavailable[method.engine] = p.stderr.strip()
                 print(f"  {method.engine} not available: {p.stderr.strip()}", flush=True)
@@ -269,7 +282,8 @@ def main() -> int:
             res["study"] = {"case": r.case, "method": r.method, "purpose": r.purpose, "budget": r.budget,
                             "seed": r.seed, "config": cfg, "pass": len(passes) + 1,
                             "finished": dt.datetime.now().astimezone().isoformat(timespec="seconds")}
-            out_file.write_text(json.dumps(res, indent=1) + "\n")
+            run_files.write(runs_dir, r.key, res)
+            out_file.unlink()
             done += 1
             save_meta(False)
         save_meta(True)

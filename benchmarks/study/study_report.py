@@ -1,8 +1,9 @@
 """Aggregation, charts and REPORT.md of the speed/accuracy study (the physical measure).
 
-build(out_dir, meta, quick) reads every run in out_dir/runs, writes runs.csv, summary.json,
-figures/*.png and REPORT.md, and returns the report's path. Every error here is
-`error_physical` (docs/measures.md): the exported mesh traced as flat triangles, nearest
+build(out_dir, meta, quick) reads every run in out_dir/runs (.json.gz, or the plain .json of
+an earlier checkout: run_files.py), writes runs.csv, summary.json, figures/*.png and
+REPORT.md, and returns the report's path. Every error here is `error_physical`
+(docs/measures.md): the exported mesh traced as flat triangles, nearest
 deposit, at the receiver's resolution, with rays enough that doubling them changes it by
 less than 0.001. The optimisers' own figure (fitted rays, bilinear deposit) appears only
 where it is named: the fitted-against-physical table and the trace chart.
@@ -25,6 +26,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
+import run_files  # noqa: E402
 import study_plan as plan  # noqa: E402
 
 FAIL_FACTOR = 1.5   # a run fails when its error_physical exceeds this times ours' median on the case
@@ -41,10 +43,10 @@ COLORS = {"ours": "#000000", "transport-only": "#d4a017", "sa-plain": "#d62728",
 
 def load_runs(out_dir: Path) -> list[dict]:
     runs = []
-    for f in sorted((out_dir / "runs").rglob("*.json")):
+    for f in run_files.files(out_dir / "runs"):
         try:
-            r = json.loads(f.read_text())
-        except (OSError, json.JSONDecodeError):
+            r = run_files.read(f)
+        except (OSError, ValueError):
             continue
         s, fin = r.get("study"), r.get("final") or {}
         if not s or "error_physical" not in fin:

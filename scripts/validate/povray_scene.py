@@ -1,7 +1,7 @@
 """Writes a POV-Ray 3.7 scene that renders a freeform scene's receiver irradiance with
 photon mapping, from the scene (freeform's effective-scene JSON) and the exported mesh.
 
-Choices, and why (docs: README "Independent validation"):
+Choices, and why (docs/measures.md, "An independent check: POV-Ray"):
 - Millimetres: the scene is scaled by 1000. POV-Ray's intersection tolerances are absolute
   (about 1e-4 to 1e-3 units); in metres a 0.1 mm facet would be near them.
 - The mirror is a `mesh2` of the exported sheet (flat triangles: no normal_vectors, so

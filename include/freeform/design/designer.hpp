@@ -139,7 +139,8 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
 //   0.0404) and on the study's grey landscape (0.0269 / 0.0265 / 0.0261 against
 //   0.0262 / 0.0306 / 0.0296, which got worse with time): the finer mesh steered single
 //   rays, and its exported facets fit fewer subdivisions in the triangle budget. Measured
-//   at equal time before that (benchmarks/results/mesh_rule, issue 11): the binary rule's
+//   at equal time before that (issue 11; docs/performance.md, "The "auto" mesh rule (err
+//   measure)"; git show 63973b0:benchmarks/results/mesh_rule/REPORT.md): the binary rule's
 //   former m (101² for 200²) ended above 2m − 1 on every seed of ten binary targets. The
 //   earlier study found 13² twice the error of 25² on the headlight.
 //   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (a 200²
@@ -331,8 +332,10 @@ struct Calibration {
 // drifted up (letter E: error 0.0426 -> 0.0527 in its first stage, which then ended
 // where it began) and spent most of its iterations coming back down. The acceptance
 // ratio rule started 11 to 300,000 times colder on the example cases; at equal
-// iterations every case ended 7-40 % lower (benchmarks/results/calibration). The temperature still sets the move
-// amplitudes (ProposalSettings), which it scales from this reference.
+// iterations every case ended 7-40 % lower (docs/performance.md, "After the calibration fix
+// (err measure)"; git show ce210ae:benchmarks/results/calibration/REPORT.md). The
+// temperature still sets the move amplitudes (ProposalSettings), which it scales from
+// this reference.
 //
 // With `timed`, slow moves cut the trials short (a time-budgeted run must not spend its
 // budget calibrating); otherwise there are always 48, so that the temperature, and with

@@ -9,8 +9,8 @@
 // the old, too hot initial temperature): the objective's error fell from 0.016 to
 // 0.010 while the same surfaces traced with other rays went from 0.0164 to 0.0170. With
 // today's calibration both fall (0.0163 -> 0.0063 fitted, -> 0.0096 on other rays;
-// benchmarks/results/calibration), and a third of the gain is still noise. On the
-// letter E and the point-light case the two agree within 1 %.
+// git show ce210ae:benchmarks/results/calibration/REPORT.md), and a third of the gain is
+// still noise. On the letter E and the point-light case the two agree within 1 %.
 //
 // A HeldOutCheck traces a surface with a second, independent jitter of the same light
 // (same count, same weights; the seed is derived from the design's) and returns the

@@ -56,10 +56,12 @@
 // Domains (ReplicaMode::domains). Tempering pays only where annealing must escape local
 // minima; ours, from a transport start and a calibrated, near-greedy schedule, rarely
 // must, and n replicas then do n times the work for one design's worth of progress
-// (benchmarks/results/mpi_v3). In this mode the ranks are not copies but parts of one
-// design: rank r centres its moves on the mesh rows [r·ny/n, (r+1)·ny/n) (a kernel
-// reaches support/2 rows beyond), with its own random streams, and every merge_every
-// iterations every rank's change since the last merge is added to the merged surface:
+// (docs/performance.md, "MPI: ranks against threads", its third tempering study; results:
+// git show 23d0eb2:benchmarks/results/mpi_v3/summary.md). In this mode the ranks are not
+// copies but parts of one design: rank r centres its moves on the mesh rows
+// [r·ny/n, (r+1)·ny/n) (a kernel reaches support/2 rows beyond), with its own random
+// streams, and every merge_every iterations every rank's change since the last merge is
+// added to the merged surface:
 //
 //   merged = base + Σ_r (h_r − base),
 //
@@ -122,7 +124,9 @@ inline ReplicaMode parse_replica_mode(const std::string& s, const std::string& w
 }
 
 // The default is domains: at equal cores and wall time it beat one rank on every case
-// measured, where tempering lost (README, "Over MPI"; benchmarks/results/mpi_domains).
+// measured, where tempering lost (docs/performance.md, "MPI: ranks against threads"; how
+// to run it: docs/cli.md, "freeform_mpi: one design on several ranks"; every run: git
+// show 1845597:benchmarks/results/mpi_domains/README.md).
 struct ReplicaOptions {
     ReplicaMode mode = ReplicaMode::domains;
     double ladder_ratio = 1.5;          // tempering: scale of rung k = ladder_ratio^k; ≥ 1
@@ -130,8 +134,9 @@ struct ReplicaOptions {
     // tempering; for domains, as many as move each vertex of a rank's strip about
     // merge_coverage times (see "Domains" above).
     std::int64_t exchange_every = 0;
-    // 30: lower errors than 10 on 16 of 20 paired runs (camera and letter E, 10 seeds,
-    // benchmarks/results/mpi_domains); larger values were not tried.
+    // 30: lower errors than 10 on 16 of 20 paired runs (camera and letter E, 10 seeds;
+    // docs/performance.md, "MPI: ranks against threads", "The merge interval"; runs: git
+    // show 1845597:benchmarks/results/mpi_domains/c10, .../c30); larger values were not tried.
     double merge_coverage = 30;
 };
 

@@ -44,7 +44,8 @@ public:
     // Empties the index for `rays` rays over `cells` cells. The per-cell lists keep their
     // memory: a rebuild of the same index (a stage putting its best state back) refills
     // them without allocating again. Under grazing light, with ~65 cells per ray, page
-    // faults were about a third of a design's profile (README, "Performance").
+    // faults were about a third of a design's profile (docs/performance.md, "The
+    // speed/accuracy study").
     void reset(std::int64_t rays, std::int64_t cells) {
         pool_.clear();
         slot_.assign(std::size_t(rays), Slot{});
