@@ -177,6 +177,58 @@ TEST_CASE("the exported mesh traced as flat triangles gives the design's irradia
         s.receiver.size = {0.15, 0.15};
         check_exported_matches(s, 51, 0.02);
     }
+    SUBCASE("lens spreading its light twice its width: the exported blank's walls stand where the tracer's do") {
+        // The start's edge rays drift past the face's edges inside the glass; the model's
+        // walls stand lens_rim beyond them, and so must the exported solid's (export_blank),
+        // or those rays would be mirrored back in the export and not in the design.
+        s.surface.material = Lens{1.49, 0.015};
+        s.surface.h_min = -0.012, s.surface.h_max = 0.012;
+        s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+        s.receiver.size = {0.2, 0.2};
+        REQUIRE(lens_rim(s) > 0);
+        check_exported_matches(s, 51, 0.02);
+    }
+}
+
+TEST_CASE("a lens's exported top: the face as designed, the rim continuing its edge slopes, whole cells") {
+    Scene s = basic_scene(100);
+    s.surface.material = Lens{1.49, 0.015};
+    s.surface.h_min = -0.012, s.surface.h_max = 0.012;
+    s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+    s.receiver.size = {0.2, 0.2};
+    Heightmap face = surface_for(s, 41);
+    shape(face, [](double u, double v) { return 0.002 * std::sin(60 * u) * std::cos(45 * v) + 0.3 * u * v; });
+    const double rim = lens_rim(s);
+    REQUIRE(rim > 0);
+    const Heightmap top = export_blank(s, face);
+    const int pu = (top.nx() - face.nx()) / 2, pv = (top.ny() - face.ny()) / 2;
+    CHECK(top.nx() == face.nx() + 2 * pu);
+    CHECK(top.du() == doctest::Approx(face.du()).epsilon(1e-12));
+    CHECK(pu * face.du() >= rim);  // at least the rim, by less than a cell more
+    CHECK((pu - 1) * face.du() < rim);
+    CHECK(pv * face.dv() >= rim);
+    double normal_change = 0, curvature = 0;
+    for (int j = 0; j < face.ny(); ++j)
+        for (int i = 0; i < face.nx(); ++i) {
+            CHECK(top(i + pu, j + pv) == face(i, j));
+            const Vec3 a = top.normals()[std::size_t((j + pv) * top.nx() + i + pu)], b = face.normals()[std::size_t(j * face.nx() + i)];
+            normal_change = std::max(normal_change, angle(static_cast<Vec3d>(a), static_cast<Vec3d>(b)));
+        }
+    CHECK(normal_change < 2e-6);  // the face's edge normals are kept (one-sided = central on a line)
+    for (int j = 0; j < top.ny(); ++j)
+        for (int i = 1; i + 1 < top.nx(); ++i)
+            if (i < pu || i >= pu + face.nx() - 1)
+                curvature = std::max(curvature, std::abs(double(top(i - 1, j)) - 2 * double(top(i, j)) + double(top(i + 1, j))));
+    CHECK(curvature < 1e-8);  // straight across the rim
+    // The solid over it is closed, and wider than the face's by the rim on each side.
+    const MeshCheck c = check_mesh(lens_solid(top, std::get<Lens>(s.surface.material), 0.5f, 2));
+    CHECK(c.watertight());
+    // A mirror, and a lens whose light stays within its face, export the face itself.
+    Scene mirror = basic_scene(100);
+    CHECK(export_blank(mirror, face).nx() == face.nx());
+    s.receiver.size = {0.05, 0.05};
+    CHECK(lens_rim(s) == 0);
+    CHECK(export_blank(s, face).nx() == face.nx());
 }
 
 TEST_CASE("a mesh is its geometry: stored normals change nothing unless asked for") {

@@ -148,6 +148,7 @@ TEST_CASE("a full scene parses with the values it states") {
     const auto& lens = std::get<Lens>(s.surface.material);
     CHECK(lens.ior == 1.5);
     CHECK(lens.thickness == 0.02);
+    CHECK(lens.rim < 0);  // "auto" when left out
     CHECK(s.surface.phong_alpha == 0.6);
     REQUIRE(s.surface.initial_paraboloid.has_value());
     CHECK(s.surface.initial_paraboloid->focal_length == 0.7);
@@ -342,6 +343,14 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
          {{"surface", {{"material", {{"refractive", 1.5}, {"thickness", 0.004}}}}}},
          "surface.material.thickness: ",
          "back face"},
+        {"lens rim negative",
+         {{"surface", {{"material", {{"refractive", 1.5}, {"thickness", 0.02}, {"rim", -0.001}}}}}},
+         "surface.material.rim: ",
+         "[0, 1]"},
+        {"lens rim word",
+         {{"surface", {{"material", {{"refractive", 1.5}, {"thickness", 0.02}, {"rim", "wide"}}}}}},
+         "surface.material.rim: ",
+         "\"auto\""},
         {"lens without ior",
          {{"surface", {{"material", {{"thickness", 0.02}}}}}},
          "surface.material.refractive: ",
@@ -548,6 +557,12 @@ TEST_CASE("scene_to_json writes every default and reads back to the same JSON") 
         CHECK(out["optimise"]["seed"] == s.optimise.seed);
         CHECK(out["light"]["rays_per_cell"] == s.light.rays_per_cell);
     }
+    // A lens's rim: "auto" is written as such, metres as given.
+    CHECK(scene_to_json(scene_from_json(full_scene()))["surface"]["material"]["rim"] == "auto");
+    json with_rim = full_scene();
+    with_rim["surface"]["material"]["rim"] = 0.003;
+    CHECK(std::get<Lens>(scene_from_json(with_rim).surface.material).rim == 0.003);
+    CHECK(scene_to_json(scene_from_json(with_rim))["surface"]["material"]["rim"] == 0.003);
     // The default point-light axis is written as the direction to the surface centre.
     const json out = scene_to_json(scene_from_json(scenes[2]));
     CHECK(out["light"]["axis"] == json::array({-0.01, 0.0, -0.3}));

@@ -3,8 +3,9 @@
 // the light comes from). A lens is a solid: the height field is its front face, a flat
 // back face lies `thickness` below the surface plane (at height -thickness), and light
 // refracts at both faces by Snell's law; total internal reflection at a face is counted
-// as lost. Its side walls (vertical, at the edges of the surface's rectangle) are glass
-// too: light that meets them is reflected inside or refracted out, as in the solid.
+// as lost. Its side walls (vertical, `rim` beyond the edges of the surface's rectangle:
+// the blank the face is milled into is that much wider) are glass too: light that meets
+// them is reflected inside or refracted out, as in the solid.
 // Fresnel partial reflection is neglected (all light that can be transmitted is).
 #include <cstdint>
 #include <variant>
@@ -16,6 +17,10 @@ struct Mirror {};
 struct Lens {
     double ior = 1.49;        // refractive index of the lens material (PMMA by default)
     double thickness = 0.01;  // metres from the surface plane to the flat back face
+    // How far the glass body reaches beyond the designed face on every side (metres); the
+    // light falls on the face only. < 0: "auto", the drift a ray needs inside the glass to
+    // reach the receiver's far edge (lens_rim in scene/scene.hpp; docs/architecture.md §4b).
+    double rim = -1;
 };
 
 using Material = std::variant<Mirror, Lens>;

@@ -17,6 +17,7 @@
 #include "../trace/embree.hpp"
 #include "../trace/setup.hpp"
 #include "cell_means.hpp"
+#include "fabrication.hpp"
 
 namespace freeform {
 
@@ -39,13 +40,14 @@ struct ExportedGeometry {
 inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, int subdivisions) {
     const float alpha = float(scene.surface.phong_alpha);
     if (const Lens* lens = std::get_if<Lens>(&scene.surface.material))
-        return {lens_solid(surface, *lens, alpha, subdivisions, false), lens->ior};
+        return {lens_solid(export_blank(scene, surface), *lens, alpha, subdivisions, false), lens->ior};
     return {tessellate_surface(surface, alpha, subdivisions, false), std::nullopt};
 }
 
 // A smooth form of the design (`point` as in detail::tessellate_local: a fitted spline,
 // the re-read STEP part) tessellated with k × k facet pairs per cell over `grid`'s active
-// cells, its vertex normals those of the form. Traced with interpolated normals, the
+// cells (for a lens, `grid` is the exported top, export_blank), its vertex normals those
+// of the form. Traced with interpolated normals, the
 // facets only place the hits: the normal error falls as k⁻² instead of k⁻¹, and the
 // figure settles at small k (docs/export.md measures it).
 template <class PointFn>

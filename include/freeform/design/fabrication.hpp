@@ -18,6 +18,7 @@
 // error a user's milled part will have (error_physical in metrics.json).
 #include <algorithm>
 #include <cmath>
+#include <vector>
 #include <variant>
 
 #include "../scene/scene.hpp"
@@ -25,6 +26,40 @@
 #include "../surface/heightmap.hpp"
 
 namespace freeform {
+
+// The top of what is exported: the face itself, or for a lens with a rim (lens_rim) the
+// face and, beyond its edges, the rim's top, rounded up to whole cells of the face's mesh.
+// Light falls on the face only and rays inside the glass only go down, so nothing traced
+// meets the rim's top; it continues the face's edge slopes linearly (the face's one-sided
+// edge normals become central differences of the same value, and the spline fitted over
+// the whole top stays smooth across the edge). The exported solid's walls and back face
+// then stand where the tracer's do (make_material_view).
+inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
+    const double rim = lens_rim(scene);
+    if (!(rim > 0)) return face;
+    const int pu = int(std::ceil(rim / face.du() - 1e-9)), pv = int(std::ceil(rim / face.dv() - 1e-9));
+    const int nx = face.nx() + 2 * pu, ny = face.ny() + 2 * pv;
+    std::vector<double> h(std::size_t(nx) * std::size_t(ny));
+    const auto at = [&](int i, int j) -> double& { return h[std::size_t(j) * std::size_t(nx) + std::size_t(i)]; };
+    for (int j = 0; j < face.ny(); ++j)
+        for (int i = 0; i < face.nx(); ++i) at(i + pu, j + pv) = face(i, j);
+    // Along u on the face's rows, then along v on every column (the corners continue both).
+    for (int j = pv; j < pv + face.ny(); ++j)
+        for (int k = 1; k <= pu; ++k) {
+            at(pu - k, j) = at(pu, j) + k * (at(pu, j) - at(pu + 1, j));
+            at(pu + face.nx() - 1 + k, j) = at(pu + face.nx() - 1, j) + k * (at(pu + face.nx() - 1, j) - at(pu + face.nx() - 2, j));
+        }
+    for (int i = 0; i < nx; ++i)
+        for (int k = 1; k <= pv; ++k) {
+            at(i, pv - k) = at(i, pv) + k * (at(i, pv) - at(i, pv + 1));
+            at(i, pv + face.ny() - 1 + k) = at(i, pv + face.ny() - 1) + k * (at(i, pv + face.ny() - 1) - at(i, pv + face.ny() - 2));
+        }
+    const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
+    Heightmap blank(nx, ny, {face.du() * (nx - 1), face.dv() * (ny - 1)}, std::min(double(face.h_min()), *lo),
+                    std::max(double(face.h_max()), *hi), face.frame(), Aperture::rect);
+    blank.set_heights(std::vector<float>(h.begin(), h.end()));
+    return blank;
+}
 
 // δ_max of the header (radians) for a scene.
 inline double facet_normal_tolerance(const Scene& scene) {
@@ -91,7 +126,7 @@ inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface
     }
     f.tolerance_met = f.normal_error <= f.normal_tolerance;
     if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
-        f.mesh = lens_solid(surface, *lens, float(alpha), f.subdivisions);
+        f.mesh = lens_solid(export_blank(scene, surface), *lens, float(alpha), f.subdivisions);
     else
         f.mesh = tessellate_surface(surface, float(alpha), f.subdivisions);
     return f;

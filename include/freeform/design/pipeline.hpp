@@ -151,8 +151,10 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
                                  const ImageD& target, int threads) {
     ExportChecks c{make_fabrication(scene, surface), {}, {}, {}, {}, {}, {}, {}, {}};
     c.machining = machining_report(scene, surface, c.fabrication.mesh);
-    c.spline = fit_bspline(surface, scene.surface.phong_alpha, spline_samples_per_cell);
-    c.spline_fit = check_spline_fit(c.spline, surface, scene.surface.phong_alpha, spline_samples_per_cell);
+    // The smooth forms cover the exported top: a lens's rim too (export_blank).
+    const Heightmap top = export_blank(scene, surface);
+    c.spline = fit_bspline(top, scene.surface.phong_alpha, spline_samples_per_cell);
+    c.spline_fit = check_spline_fit(c.spline, top, scene.surface.phong_alpha, spline_samples_per_cell);
     c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(scene.optimise.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)
     const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);

@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "../core/exec.hpp"
 #include "../objective/target.hpp"
@@ -108,23 +109,25 @@ struct TransportStart {
 // The transport start of `initial`'s mesh on each grid of start_grid_cells_per_pixel (a
 // grid that max_grid makes equal to the one before is not solved twice), the better one
 // under the exact tracer, with the same rays for both: the choice depends on the scene
-// alone. A lens whose plain map sends light into its side walls is also started with wall
-// strips (WallStrips, measured once on the cheaper grid) on each grid, and the exact
-// tracer judges those starts with the plain ones: the strips remove the cross the walls
-// throw, but their mirrored light lands where the target may be black (a letter), and
-// there the plain start can be the better one. An InputError on the first grid (no light
-// reaches the receiver) propagates.
+// alone. A lens whose plain map still sends light into its side walls (a rim narrower
+// than lens_rim's "auto") is also started with wall strips (WallStrips, measured on the
+// plain start of the cheaper grid) on each grid, and the exact tracer judges those starts
+// with the plain ones: the strips remove the cross the walls throw, but their mirrored
+// light lands where the target may be black (a letter), and there the plain start can be
+// the better one. An InputError on the first grid (no light reaches the receiver) propagates.
 inline TransportStart best_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                            std::uint64_t seed, int threads) {
     std::optional<TransportStart> best;
     const FlatFootprint fp = flat_footprint(scene, initial);
-    TransportOptions strip_options;
-    strip_options.ot.threads = threads;
-    strip_options.cells_per_pixel = start_grid_cells_per_pixel.back();
-    const WallStrips strips = lens_wall_strips(scene, initial, target_image, seed, strip_options);
-    WallStrips plain = strips;  // no strips, the measurement kept for the report
-    plain.margin = {};
-    const auto candidate = [&](double cells_per_pixel, const WallStrips& walls) {
+    const auto grid_of = [&](double cells_per_pixel) {
+        TransportOptions options;
+        options.cells_per_pixel = cells_per_pixel;
+        return transport_grid(scene, fp, options);
+    };
+    const auto same = [](const OtGrid& a, const OtGrid& b) { return a.nx == b.nx && a.ny == b.ny && a.hx == b.hx; };
+    const OtGrid strip_grid = grid_of(start_grid_cells_per_pixel.back());
+    WallStrips strips;  // measured on the plain start of strip_grid (a lens's)
+    const auto candidate = [&](double cells_per_pixel, const WallStrips& walls, bool measure) {
         TransportOptions options;
         options.ot.threads = threads;
         options.cells_per_pixel = cells_per_pixel;
@@ -133,6 +136,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
         TransportReport fitted = map.report;
         Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
         map.report = fitted;
+        if (measure) strips = measure_wall_strips(scene, map, surface);
         const SurfaceEvaluation eval = evaluate_surface(scene, surface, target_image, seed, threads);
         if (!best) {
             best = TransportStart{std::move(map), std::move(surface), eval};
@@ -146,15 +150,17 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
         }
     };
     OtGrid tried{};
+    std::vector<double> solved;
     for (const double cells_per_pixel : start_grid_cells_per_pixel) {
-        TransportOptions options;
-        options.cells_per_pixel = cells_per_pixel;
-        const OtGrid g = transport_grid(scene, fp, options);
-        if (g.nx == tried.nx && g.ny == tried.ny && g.hx == tried.hx) continue;
+        const OtGrid g = grid_of(cells_per_pixel);
+        if (same(g, tried)) continue;
         tried = g;
-        candidate(cells_per_pixel, plain);
-        if (strips.any()) candidate(cells_per_pixel, strips);
+        solved.push_back(cells_per_pixel);
+        candidate(cells_per_pixel, WallStrips{}, is_lens(scene.surface.material) && same(g, strip_grid));
     }
+    if (strips.any())
+        for (const double cells_per_pixel : solved) candidate(cells_per_pixel, strips, false);
+    best->map.report.wall_fraction = strips.wall_fraction;
     return std::move(*best);
 }
 

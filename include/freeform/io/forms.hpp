@@ -27,13 +27,15 @@ namespace freeform::io {
 
 namespace forms_detail {
 
-// Traces a smooth form given by `at(u, v)` → (point, unit normal) over `grid`'s cells.
+// Traces a smooth form given by `at(u, v)` → (point, unit normal) over the cells of the
+// exported top of `grid` (export_blank: a lens's rim too); `grid` places the rays.
 template <class At>
 void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const ImageD* target, int threads, At&& at) {
 #if defined(FREEFORM_WITH_EMBREE)
-    fc.tessellation = judge_subdivisions(grid);
-    const ExportedGeometry g = smooth_geometry(scene, grid, fc.tessellation, [&](int ci, int cj, double a, double b) {
-        return at(grid.u_of(ci) + a * grid.du(), grid.v_of(cj) + b * grid.dv());
+    const Heightmap top = export_blank(scene, grid);
+    fc.tessellation = judge_subdivisions(top);
+    const ExportedGeometry g = smooth_geometry(scene, top, fc.tessellation, [&](int ci, int cj, double a, double b) {
+        return at(top.u_of(ci) + a * top.du(), top.v_of(cj) + b * top.dv());
     });
     fc.triangles = std::int64_t(g.mesh.triangles.size());
     if (target)

@@ -181,6 +181,9 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
     exported["forms"] = forms;
     m["export"] = exported;
     m["fabrication"] = fabrication_json(c.machining, scene.surface.tool_radius);
+    // How far a lens's glass body reaches beyond its face (scene/scene.hpp lens_rim); the
+    // exported solid rounds it up to whole cells (design/fabrication.hpp export_blank).
+    if (is_lens(scene.surface.material)) m["fabrication"]["lens_rim"] = lens_rim(scene);
 }
 
 // metrics.json's export.forms entry of a smooth form written and read back (io/forms.hpp).

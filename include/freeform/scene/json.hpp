@@ -366,7 +366,7 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
             s.material = Mirror{};
         } else if (v->is_object()) {
             const Object m(*v, p);
-            static constexpr std::array<std::string_view, 2> lens_keys{"refractive", "thickness"};
+            static constexpr std::array<std::string_view, 3> lens_keys{"refractive", "thickness", "rim"};
             m.only(lens_keys, [](const std::string& k) -> std::optional<std::string> {
                 if (k == "mirror") return "a mirror is written \"material\": \"mirror\"";
                 return std::nullopt;
@@ -381,9 +381,15 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
                                                    " (minus surface.height_bounds[0]) so that the flat back face "
                                                    "lies below the lowest height, got " +
                                                    format_number(lens.thickness));
+            if (const json* r = m.find("rim")) {
+                if (r->is_string() && r->get<std::string>() == "auto") lens.rim = -1;
+                else if (r->is_string()) throw error(m.at("rim"), "expected \"auto\" or metres >= 0, got " + describe(*r));
+                else lens.rim = number_in(*r, m.at("rim"), 0, 1);
+            }
             s.material = lens;
         } else {
-            throw error(p, "expected \"mirror\" or {\"refractive\": ior, \"thickness\": metres}, got " + describe(*v));
+            throw error(p, "expected \"mirror\" or {\"refractive\": ior, \"thickness\": metres, \"rim\": metres}, got " +
+                               describe(*v));
         }
     }
     if (const json* v = o.find("phong_alpha")) s.phong_alpha = number_in(*v, o.at("phong_alpha"), 0, 1);
@@ -932,7 +938,9 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     surface["height_bounds"] = json::array({sf.h_min, sf.h_max});
     surface["aperture"] = enum_name(sf.aperture, aperture_names);
     if (const auto* lens = std::get_if<Lens>(&sf.material))
-        surface["material"] = json{{"refractive", lens->ior}, {"thickness", lens->thickness}};
+        surface["material"] = json{{"refractive", lens->ior},
+                                   {"thickness", lens->thickness},
+                                   {"rim", lens->rim < 0 ? json("auto") : json(lens->rim)}};
     else
         surface["material"] = "mirror";
     surface["phong_alpha"] = sf.phong_alpha;

@@ -1,12 +1,15 @@
 #pragma once
 // A complete design problem as read from a scene file (see docs/scene.md): what emits
 // light, the surface to design, where the light must land and what it should look like.
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include "../core/material.hpp"
@@ -188,6 +191,48 @@ inline bool starts_from_transport(const Scene& scene) {
     if (!s.initial_pfm.empty() || s.initial_paraboloid) return false;
     return s.initial_shape == InitialShape::transport ||
            (s.initial_shape == InitialShape::automatic && scene.target.has_value());
+}
+
+// How far a lens's glass body reaches beyond its face on every side (metres; 0 for a
+// mirror): Lens::rim, or for "auto" (rim < 0) the rim that keeps the light away from the
+// side walls (docs/architecture.md §4b). A face that throws its light wider than itself
+// tilts its edge rays outwards inside the glass; in a body no wider than the face they
+// meet a side wall, which mirrors them back across the receiver (the bright cross of a
+// lens whose receiver is larger than it). "auto" takes the largest drift inside the glass
+// of a ray from a corner of the face, at the top of the height bounds, to a corner of the
+// receiver: the exit point on the back face that the back face's refraction aims at the
+// receiver corner, solved by fixed point. A quarter more for the rays the design aims
+// past the receiver's edge, rounded up to half a millimetre; 0 when no such ray drifts
+// outwards (a receiver no wider than the face) and for an elliptical aperture (whose body
+// is the rectangle around it).
+inline double lens_rim(const Scene& scene) {
+    const auto* lens = std::get_if<Lens>(&scene.surface.material);
+    if (!lens) return 0;
+    if (lens->rim >= 0) return lens->rim;
+    const SurfaceSpec& sf = scene.surface;
+    if (sf.aperture != Aperture::rect) return 0;
+    const double hu = 0.5 * sf.size.x, hv = 0.5 * sf.size.y, n = lens->ior;
+    const Receiver& r = scene.receiver;
+    double drift = 0;
+    for (int c = 0; c < 4; ++c) {
+        const Vec3d q = sf.frame.to_local(r.frame.origin + (c & 1 ? 0.5 : -0.5) * r.size.x * r.frame.u +
+                                          (c & 2 ? 0.5 : -0.5) * r.size.y * r.frame.v);
+        for (int k = 0; k < 4; ++k) {
+            const Vec3d s{k & 1 ? hu : -hu, k & 2 ? hv : -hv, sf.h_max};
+            Vec3d e{s.x, s.y, -lens->thickness};
+            for (int it = 0; it < 8; ++it) {
+                const Vec3d out = normalize(q - e);
+                const double gx = out.x / n, gy = out.y / n;
+                const double gz = std::sqrt(std::max(1e-12, 1.0 - gx * gx - gy * gy));
+                const double depth = (s.z + lens->thickness) / gz;
+                e = {s.x + gx * depth, s.y + gy * depth, -lens->thickness};
+            }
+            drift = std::max({drift, std::abs(e.x) - hu, std::abs(e.y) - hv});
+        }
+    }
+    if (!(drift > 1e-9)) return 0;
+    const double step = 0.0005;
+    return step * std::ceil(1.25 * drift / step - 1e-9);
 }
 
 }  // namespace freeform

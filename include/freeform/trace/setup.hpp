@@ -22,21 +22,22 @@ inline ReceiverView make_receiver_view(const Receiver& r, const Frame& surface_f
     return v;
 }
 
-inline MaterialView make_material_view(const Material& m, Vec2d size) {
+// A lens body's side walls stand `rim` beyond the face's edges (lens_rim).
+inline MaterialView make_material_view(const Material& m, Vec2d size, double rim = 0) {
     MaterialView v;
     if (const auto* lens = std::get_if<Lens>(&m)) {
         v.lens = true;
         v.ior = float(lens->ior);
         v.back_w = float(-lens->thickness);
-        v.half_u = float(0.5 * size.x);
-        v.half_v = float(0.5 * size.y);
+        v.half_u = float(0.5 * size.x + rim);
+        v.half_v = float(0.5 * size.y + rim);
     }
     return v;
 }
 
 inline PathParams make_path_params(const Scene& scene) {
     PathParams p;
-    p.material = make_material_view(scene.surface.material, scene.surface.size);
+    p.material = make_material_view(scene.surface.material, scene.surface.size, lens_rim(scene));
     p.receiver = make_receiver_view(scene.receiver, scene.surface.frame);
     p.phong_alpha = float(scene.surface.phong_alpha);
     p.max_depth = scene.trace.max_depth;

@@ -42,11 +42,13 @@
 
 namespace freeform {
 
-// A lens's light leaves through its flat back face, and the body has side walls under the
-// face's edges (trace/path.hpp). A map that spreads the light wider than the lens tilts
-// every ray outwards inside the glass, so the rays that enter within a few millimetres of
-// an edge drift past it and meet the wall; total internal reflection there mirrors them
-// back across the receiver. Left to the plain map, an edge strip's light lands on the
+// A lens's light leaves through its flat back face, and the body has side walls (trace/
+// path.hpp), lens_rim beyond the face's edges: the "auto" rim puts them where no ray the
+// map aims at the receiver meets them, and then nothing below applies (no strip is
+// measured). With a narrower rim (a user's "rim": 0): a map that spreads the light wider
+// than the lens tilts every ray outwards inside the glass, so the rays that enter within a
+// few millimetres of an edge drift past it and meet the wall; total internal reflection
+// there mirrors them back across the receiver. Left to the plain map, an edge strip's light lands on the
 // centre row or column (a bright cross) and the receiver's edges go dark. No monotone map
 // avoids the walls: the ray entering at the very edge would have to leave straight down.
 // So the start uses them (docs/architecture.md §4b): the map carries the light of the
@@ -62,7 +64,7 @@ struct WallStrips {
     double half_u = 0, half_v = 0;  // the lens body's half extents
     double wall_fraction = 0;       // share of the active vertices the plain map sent into a wall
     // The map that places the strips' mirrored light when the start's map is solved (the
-    // plain map of lens_wall_strips); unset: the strips' light is not subtracted.
+    // plain map they were measured on); unset: the strips' light is not subtracted.
     std::shared_ptr<const OtResult> placement;
     std::shared_ptr<const Heightmap> placement_surface;  // the surface fitted to it (glass thickness)
 
@@ -100,7 +102,7 @@ struct TransportOptions {
     double rays_per_grid_cell = 16;  // rays sampling the source footprint, per grid cell it covers
     int fit_iterations = 4;        // map → normals → heights rounds (near field)
     OtOptions ot{};
-    WallStrips strips{};           // a lens's wall strips (lens_wall_strips); none: the plain map
+    WallStrips strips{};           // a lens's wall strips (measure_wall_strips); none: the plain map
 };
 
 // What the transport start did, for metrics.json.
@@ -592,7 +594,9 @@ inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& ma
     WallStrips strips;
     const transport_detail::Optics optics(scene);
     if (!optics.lens) return strips;
-    const double hu = 0.5 * scene.surface.size.x, hv = 0.5 * scene.surface.size.y;
+    // The body's walls stand lens_rim beyond the face's edges.
+    const double rim = lens_rim(scene);
+    const double hu = 0.5 * scene.surface.size.x + rim, hv = 0.5 * scene.surface.size.y + rim;
     strips.half_u = hu, strips.half_v = hv;
     const int nx = plain.nx(), ny = plain.ny();
     // Each active vertex's exit point (NaN: inactive or unmapped).
@@ -656,20 +660,6 @@ inline WallStrips measure_wall_strips(const Scene& scene, const TransportMap& ma
         strips.placement_surface = std::make_shared<const Heightmap>(plain);
     }
     return strips;
-}
-
-// The wall strips of a lens design's start: the plain map solved with `options` (its
-// grid; no strips), fitted on `initial`'s mesh and measured (measure_wall_strips); the
-// plain map then places the strips' light. Mirrors return at once with none.
-inline WallStrips lens_wall_strips(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
-                                   std::uint64_t seed, const TransportOptions& options) {
-    if (!std::holds_alternative<Lens>(scene.surface.material)) return {};
-    TransportOptions plain_options = options;
-    plain_options.strips = {};
-    const TransportMap plain = solve_transport(scene, initial, target_image, seed, plain_options);
-    TransportReport report = plain.report;
-    const Heightmap fitted = surface_from_transport(scene, plain, initial.nx(), initial.ny(), report, plain_options);
-    return measure_wall_strips(scene, plain, fitted);
 }
 
 }  // namespace freeform
