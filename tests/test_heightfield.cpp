@@ -177,7 +177,7 @@ TEST_CASE("total internal reflection at the back face is counted as lost") {
     s.surface.h_min = -0.029;
     s.surface.h_max = 0.029;
     s.surface.phong_alpha = 0;
-    s.surface.material = Lens{n, thick};
+    s.surface.material = Lens{n, thick, 0.0};  // rim 0: the side walls at the face's edges
     s.light.shape = CollimatedLight{{std::sin(phi), 0, -std::cos(phi)}};
     Heightmap hm = surface_for(s, 11);
     shape(hm, [&](double u, double) { return std::tan(beta) * u; });

@@ -490,21 +490,34 @@ TEST_CASE("light that meets the lens model's side wall is reflected inside, as i
     // entering within 2 mm of the +u edge meet the side wall first, at 78.6 degrees from
     // its normal (beyond the critical angle), and leave through the back face after one
     // reflection. The height-field lens model must do what its solid, a glass box, does.
+    // With a rim (surface.material.rim) the walls stand that far beyond the face: the glass
+    // box is wider by it, the light still falls on the face only, and the rays drifting
+    // past the face's edge leave through the back face without meeting a wall.
     const double n = 1.49, t = 0.01;
-    Scene s = lens_bench(0.3, 0.4, 100);
-    s.surface.material = Lens{n, t};
-    s.surface.h_min = -0.002, s.surface.h_max = 0.002;
-    s.light.shape = CollimatedLight{{std::sin(0.3), 0, -std::cos(0.3)}};
-    const Heightmap flat = surface_for(s, 11);
-    const RaySet rays = generate_rays(s.light, flat, s.receiver, 1);
-    const Traced model = trace_scene(s, flat, rays);
-    const double hu = 0.5 * s.surface.size.x, hv = 0.5 * s.surface.size.y;
-    const Traced solid = trace_meshes(s, rays, {ExtraMesh{box({-hu, -hv, -t}, {hu, hv, 0}), MeshMaterial::refractive(n)}});
-    const double l1 = l1_distance(model.histogram, solid.histogram) / (2.0 * double(rays.total));
-    MESSAGE("energy: lens model ", model.totals.energy(), ", glass box ", solid.totals.energy(), "; L1 ", l1);
-    CHECK(model.totals.energy() > 0.999);  // absorbing walls would lose about 2 %
-    CHECK(solid.totals.energy() > 0.999);
-    CHECK(l1 < 0.002);
+    for (const double rim : {0.0, 0.003}) {
+        CAPTURE(rim);
+        Scene s = lens_bench(0.3, 0.4, 100);
+        s.surface.material = Lens{n, t, rim};
+        s.surface.h_min = -0.002, s.surface.h_max = 0.002;
+        s.light.shape = CollimatedLight{{std::sin(0.3), 0, -std::cos(0.3)}};
+        const Heightmap flat = surface_for(s, 11);
+        const RaySet rays = generate_rays(s.light, flat, s.receiver, 1);
+        const Traced model = trace_scene(s, flat, rays);
+        const double hu = 0.5 * s.surface.size.x + rim, hv = 0.5 * s.surface.size.y + rim;
+        const Traced solid =
+            trace_meshes(s, rays, {ExtraMesh{box({-hu, -hv, -t}, {hu, hv, 0}), MeshMaterial::refractive(n)}});
+        const double l1 = l1_distance(model.histogram, solid.histogram) / (2.0 * double(rays.total));
+        MESSAGE("energy: lens model ", model.totals.energy(), ", glass box ", solid.totals.energy(), "; L1 ", l1);
+        CHECK(model.totals.energy() > 0.999);  // absorbing walls would lose about 2 %
+        CHECK(solid.totals.energy() > 0.999);
+        CHECK(l1 < 0.002);
+        if (rim > 0) {
+            // And the rim matters here: the face-sized box mirrors the edge light elsewhere.
+            const Traced flush = trace_meshes(s, rays, {ExtraMesh{box({-hu + rim, -hv + rim, -t}, {hu - rim, hv - rim, 0}),
+                                                                  MeshMaterial::refractive(n)}});
+            CHECK(l1_distance(model.histogram, flush.histogram) / (2.0 * double(rays.total)) > 0.01);
+        }
+    }
 }
 
 TEST_CASE("Fresnel on refractive meshes: a glass box at normal and at 30 degrees' incidence") {

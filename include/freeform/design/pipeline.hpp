@@ -177,6 +177,10 @@ struct CompletedDesign {
     TracedDesign fitted;   // traced with the scene's seed: the rays it was fitted to
     std::optional<double> error_held_out;  // with the final level's held-out rays (checks on)
     ExportChecks exported;
+    // Wall time after the annealing (result.seconds, the start included, is what
+    // optimise.time_budget bounds): smoothing, the tool's cut, the final traces and the
+    // export checks. The summary states it beside the budget.
+    double finish_seconds = 0;
 
     // The figure a design is judged by: the cell-mean error of the exported mesh
     // (docs/measures.md); empty in a build without Embree.
@@ -190,6 +194,7 @@ struct CompletedDesign {
 // judges an annealed design: the fitted and held-out errors, the export and its cell means.
 inline CompletedDesign finish_design(const Scene& scene, DesignResult result, const ImageD& target,
                                      const DesignCallbacks& callbacks = {}) {
+    const auto t0 = std::chrono::steady_clock::now();
     const DesignOptions& options = scene.optimise;
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
     // The tool's cut last of all: every figure describes what the mill leaves.
@@ -202,6 +207,7 @@ inline CompletedDesign finish_design(const Scene& scene, DesignResult result, co
         d.error_held_out = trace_design(scene, d.result.surface, target, d.result.held_out_seed, threads).error;
     if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
     d.exported = check_export(scene, d.result.surface, d.fitted, target, threads);
+    d.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return d;
 }
 

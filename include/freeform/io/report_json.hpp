@@ -221,7 +221,8 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
     m["iterations"] = r.iterations;
     if (d.scene.surface.tool_radius > 0) m["tool_cut_max_added"] = r.tool_cut;  // metres the cutter left
     m["accepted"] = r.accepted;
-    m["seconds"] = r.seconds;
+    m["seconds"] = r.seconds;  // the design, its start included: what optimise.time_budget bounds
+    m["finish_seconds"] = d.finish_seconds;  // then the final traces and the export checks
     m["iterations_per_second"] = r.seconds > 0 ? double(r.iterations) / r.seconds : 0.0;
     m["seed"] = options.seed;
     m["tracer"] = "heightfield";
