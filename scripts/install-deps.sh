@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages freeform needs, and only those that are missing.
-#   scripts/install-deps.sh          build, test and demo dependencies
+#   scripts/install-deps.sh          build, test and demo dependencies (the Python module's included)
 #   scripts/install-deps.sh bench    also the optimisers the benchmark studies compare against
 #   scripts/install-deps.sh clang    also Debian's clang (make test-clang; libomp-dev is in the base list)
 #   scripts/install-deps.sh validate also POV-Ray 3.7 and numpy (make validate: independent check of the tracer)
@@ -14,6 +14,7 @@ packages=(
     libopenmpi-dev openmpi-bin
     libocct-data-exchange-dev libocct-modeling-algorithms-dev libocct-modeling-data-dev libocct-foundation-dev
     fonts-dejavu-core python3 python3-matplotlib
+    pybind11-dev python3-dev python3-numpy python3-pytest
 )
 for arg in "$@"; do
     case "$arg" in

@@ -37,6 +37,7 @@
 
 #include <freeform/freeform.hpp>
 #include <freeform/io/forms.hpp>
+#include <freeform/io/outputs.hpp>
 #include <freeform/scene/json.hpp>
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
@@ -195,24 +196,6 @@ constexpr bool mpi_built =
     false;
 #endif
 
-ImageD target_image_of(const Target& t) {
-    ImageD img(t.height, t.width);
-    for (int y = 0; y < t.height; ++y)
-        for (int x = 0; x < t.width; ++x) img(y, x) = from_fixed(t.cells[std::size_t(y) * t.width + x]);
-    return img;
-}
-
-// target | result | difference (blue: too little light, red: too much), same exposure.
-io::RgbImage comparison_image(const ImageD& result, const ImageD& target) {
-    const double peak = std::max(target.maxCoeff(), 1e-300);
-    const ImageF t = (target / peak).min(1.0).cast<float>();
-    const ImageF r = (result / peak).min(1.0).cast<float>();
-    const ImageD diff = result - target;
-    return io::hconcat({io::grey_to_rgb(t), io::grey_to_rgb(r), io::diverging(diff, peak)});
-}
-
-void write_json(const fs::path& file, const json& j) { io::write_file_atomically(file, j.dump(2) + "\n"); }
-
 // Refuses an output directory that cannot be created or written before any work is done,
 // so that a long design never fails at its end (nothing is created here), and one where
 // an output file's name is taken by a folder.
@@ -263,9 +246,9 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
     staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(shown)); });
     if (cells)
         staged.write("comparison.png", [&](const fs::path& f) {
-            io::write_png(f, comparison_image(shown, target_image_of(cells->target)));
+            io::write_png(f, io::comparison_image(shown, io::target_image_of(cells->target)));
         });
-    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
+    staged.write("metrics.json", [&](const fs::path& f) { io::write_json(f, m); });
     staged.commit("metrics.json");
 }
 
@@ -316,38 +299,12 @@ RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
     return job;
 }
 
-// `mesh`: a mesh was traced in the surface's place, of `mesh_material` when one was given.
+// metrics.json of a render (io::render_metrics_json) with the command and the scene's path.
 json render_metrics(const RenderArgs& a, bool mesh, const std::optional<MeshMaterial>& mesh_material,
                     const RenderResult& r) {
-    const Scene& scene = r.scene;
-    json m;
+    json m = io::render_metrics_json(r, mesh, mesh_material, a.mesh_normals);
     m["command"] = "render";
     m["scene"] = a.scene.string();
-    m["tracer"] = tracer_name(r.decision.tracer);
-    m["tracer_reason"] = r.decision.reason;
-    m["threads"] = r.threads;
-    m["seed"] = scene.optimise.seed;
-    m["rays"] = r.rays;
-    m["rays_hit_receiver"] = r.totals.rays_hit_receiver;
-    m["energy"] = r.totals.energy();
-    m["where_light_went"] = io::totals_json(r.totals);
-    m["seconds"] = r.seconds;
-    m["rays_per_second"] = r.seconds > 0 ? double(r.rays) / r.seconds : 0.0;
-    m["mesh"] = json::array({r.surface.nx(), r.surface.ny()});
-    m["receiver_resolution"] = json::array({scene.receiver.width, scene.receiver.height});
-    if (mesh || !scene.meshes.empty())
-        m["mesh_shading"] = a.mesh_normals ? "interpolated vertex normals (not physical)" : "flat facets (geometry)";
-    if (mesh)
-        m["mesh_material"] = mesh_material ? json{{"refractive", mesh_material->ior}}
-                                           : json("the scene's surface material");
-    if (r.cells) {
-        m["error"] = *r.error;
-        m["error_physical"] = r.cells->error;
-        m["energy_physical"] = r.cells->totals.energy();
-        m["cell_means"] = io::cell_means_json(*r.cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
-    }
-    if (r.start) m["start"] = io::start_report_json(*r.start);
-    m["effective_scene"] = scene_to_json(scene);
     return m;
 }
 
@@ -452,67 +409,6 @@ RankLayout rank_layout(int threads) {
     return l;
 }
 #endif
-
-// A design's files. Every file is staged and moved into place together, metrics.json
-// last (io/staged_output.hpp): a run killed while writing leaves no metrics.json beside
-// a partial result, and a failed write leaves the previous results as they were. The
-// smooth forms (surface.step, surface.dat) are written first, read back from the staging
-// folder and judged: their figures go into export.forms, and the images show the cell
-// means of the form that leads (optimise.export_formats), else of the mesh, else (no
-// Embree) the design's own irradiance.
-void write_design_outputs(const fs::path& out, json& m, const CompletedDesign& d, const ImageD& target,
-                          const std::vector<ExportFormat>& formats,
-                          const std::function<void(const std::string&)>& phase) {
-    io::StagedOutput staged(out);
-    const TriangleMesh& fab = d.exported.fabrication.mesh;
-    std::optional<CellMeans> shown;
-    std::string shown_what = "the design's own irradiance (a build without Embree)";
-    for (const ExportFormat format : formats) {
-        if (format == ExportFormat::mesh) {
-            staged.write("surface.obj", [&](const fs::path& f) { io::write_obj(f, fab); });
-            staged.write("surface.stl", [&](const fs::path& f) { io::write_stl(f, fab); });
-            continue;
-        }
-        const char* name = io::export_file_name(format);
-        phase(std::string("writing ") + name + ", reading it back and tracing it");
-        staged.write(name, [&](const fs::path& f) {
-            io::FormCheck fc = io::write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline,
-                                                        &target, d.scene.optimise.threads);
-            m["export"]["forms"][std::string(to_string(format))] = io::form_json(fc);
-            if (format == formats.front() && fc.cells) {
-                // The form the scene exports first is the part judged: error_physical is its figure.
-                m["error_physical"] = fc.cells->error;
-                m["energy_physical"] = fc.cells->totals.energy();
-                m["error_physical_form"] = std::string(to_string(format));
-                shown = std::move(fc.cells);
-                shown_what = std::string("the cell means of ") + name + ", read back and traced";
-            }
-        });
-    }
-    if (!shown && d.exported.cells) {
-        shown = d.exported.cells;
-        shown_what = "the cell means of surface.obj, traced as flat triangles";
-    }
-    const ImageD irradiance = shown ? shown->histogram.to_image() : d.fitted.histogram.to_image();
-    const ImageD target_img = shown ? target_image_of(shown->target) : target_image_of(d.fitted.target);
-    staged.write("convergence.csv", [&](const fs::path& f) { io::write_file_atomically(f, io::convergence_csv(d.result)); });
-    staged.write("heightmap.pfm", [&](const fs::path& f) { io::write_heightmap(f, d.result.surface); });
-    staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
-    staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(irradiance)); });
-    staged.write("target.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(target_img)); });
-    staged.write("comparison.png",
-                 [&](const fs::path& f) { io::write_png(f, comparison_image(irradiance, target_img)); });
-    json formats_json = json::array(), files_json = json::array();
-    for (const ExportFormat format : formats) {
-        formats_json.push_back(std::string(to_string(format)));
-        files_json.push_back(io::export_file_name(format));
-    }
-    m["export"]["formats"] = formats_json;
-    m["export"]["files"] = files_json;
-    m["export"]["images_show"] = shown_what;
-    staged.write("metrics.json", [&](const fs::path& f) { write_json(f, m); });
-    staged.commit("metrics.json");
-}
 
 // One form's figure for the summary: "0.0358" and how it was traced.
 std::string form_figure(const json& forms, const std::string& name) {
@@ -768,7 +664,7 @@ int run_design(const DesignArgs& a) {
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
     if (!quiet) status.show("writing the results");
-    write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
+    io::write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
         if (!quiet) status.show(what);
     });
     status.finish();

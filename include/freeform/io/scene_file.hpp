@@ -200,6 +200,31 @@ inline Scene load_scene(const std::filesystem::path& file, const Limits& limits 
     return scene;
 }
 
+// The heights of `img` (metres; image row 0 is the +v edge) on `scene`'s surface, on the
+// grid the image has, clamped to surface.height_bounds. `what` names the image in errors
+// ("surface.initial: heightmap 'h.pfm'"). Throws InputError for fewer than 2 x 2 pixels
+// or a non-finite value.
+inline Heightmap heightmap_from_image(const Scene& scene, const ImageF& img, const std::string& what) {
+    const SurfaceSpec& s = scene.surface;
+    const int cols = int(img.cols()), rows = int(img.rows());
+    if (cols < 2 || rows < 2)
+        throw InputError(what + " is " + std::to_string(cols) + " x " + std::to_string(rows) +
+                         " pixels; at least 2 x 2 are needed");
+    std::vector<float> heights(std::size_t(cols) * std::size_t(rows));
+    for (int r = 0; r < rows; ++r)
+        for (int c = 0; c < cols; ++c) {
+            const float value = img(r, c);
+            if (!std::isfinite(value))
+                throw InputError(what + " has a non-finite value at row " + std::to_string(r) + ", column " +
+                                 std::to_string(c));
+            // Image row 0 is the top, the +v edge of the surface: grid row ny-1.
+            heights[std::size_t(rows - 1 - r) * cols + c] = value;
+        }
+    Heightmap h(cols, rows, s.size, s.h_min, s.h_max, s.frame, s.aperture);
+    h.set_heights(heights);
+    return h;
+}
+
 // The starting surface of a design on an nx × ny vertex grid: flat (height 0, clamped
 // to the bounds), the paraboloid h = r²/(4f), or the PFM heightmap of surface.initial
 // (values in metres; image row 0 is the +v edge), resampled bilinearly when its size
@@ -215,23 +240,8 @@ inline Heightmap make_initial_heightmap(const Scene& scene, int nx, int ny, cons
     } catch (const IoError& e) {
         throw IoError(std::string("surface.initial: ") + e.what());
     }
-    const int cols = int(img.cols()), rows = int(img.rows());
-    if (cols < 2 || rows < 2)
-        throw InputError("surface.initial: heightmap '" + path.string() + "' is " + std::to_string(cols) + " x " +
-                         std::to_string(rows) + " pixels; at least 2 x 2 are needed");
-    std::vector<float> heights(std::size_t(cols) * std::size_t(rows));
-    for (int r = 0; r < rows; ++r)
-        for (int c = 0; c < cols; ++c) {
-            const float value = img(r, c);
-            if (!std::isfinite(value))
-                throw InputError("surface.initial: heightmap '" + path.string() + "' has a non-finite value at row " +
-                                 std::to_string(r) + ", column " + std::to_string(c));
-            // Image row 0 is the top, the +v edge of the surface: grid row ny-1.
-            heights[std::size_t(rows - 1 - r) * cols + c] = value;
-        }
-    Heightmap from_file(cols, rows, s.size, s.h_min, s.h_max, s.frame, s.aperture);
-    from_file.set_heights(heights);
-    if (cols == nx && rows == ny) return from_file;
+    Heightmap from_file = heightmap_from_image(scene, img, "surface.initial: heightmap '" + path.string() + "'");
+    if (from_file.nx() == nx && from_file.ny() == ny) return from_file;
     return from_file.resampled(nx, ny);
 }
 
