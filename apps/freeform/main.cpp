@@ -462,6 +462,12 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
     std::printf("%s after %lld iterations in %.1f s (%.0f it/s)%s\n", result.stopped_early ? "interrupted" : "done",
                 (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                 result.stopped_early ? " -- best result so far written" : "");
+    // Where the time went: the budget bounds the design, its start included; the final
+    // traces and the export checks come after it.
+    const double budget = d.scene.optimise.time_budget;
+    std::printf("  time: %.1f s designing%s, then %.1f s for the final traces and the export checks\n", result.seconds,
+                budget > 0 ? (" (time budget " + fixed(budget, 1) + " s, the start included)").c_str() : "",
+                d.finish_seconds);
     print_forms(d, m);
     std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
     if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
@@ -477,6 +483,10 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                     ? (", thinnest glass " + fixed(fab_report["min_glass_thickness"].get<double>() * 1e3, 2) + " mm")
                           .c_str()
                     : "");
+    if (fab_report.contains("lens_rim") && fab_report["lens_rim"].get<double>() > 0)
+        std::printf("  lens body: %.1f mm wider than the face on every side (surface.material.rim), so that the light "
+                    "the face spreads leaves through the back face, not the side walls\n",
+                    fab_report["lens_rim"].get<double>() * 1e3);
     const StartReport& st = result.start;
     std::printf("  start: %s%s%s", to_string(st.used),
                 st.error >= 0 ? (", error " + fixed(st.error, 4)).c_str() : "",
@@ -754,8 +764,9 @@ int run_export(const ExportArgs& a) {
         export_mesh(a, kind, scene, hm, target);
     } else {
         const double alpha = scene.surface.phong_alpha;
-        const BSplineSurface spline = fit_bspline(hm, alpha, spline_samples_per_cell);
-        const SplineFitReport fit = check_spline_fit(spline, hm, alpha, spline_samples_per_cell);
+        const Heightmap top = export_blank(scene, hm);  // a lens's rim too
+        const BSplineSurface spline = fit_bspline(top, alpha, spline_samples_per_cell);
+        const SplineFitReport fit = check_spline_fit(spline, top, alpha, spline_samples_per_cell);
         const io::FormCheck fc =
             io::write_and_check_form(kind == ExportFile::step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
                                      hm, spline, target ? &*target : nullptr, a.threads);
