@@ -333,6 +333,35 @@ inline constexpr std::array<EnumName<int>, 3> light_type_names{{{"collimated", 0
 
 // ---- blocks -----------------------------------------------------------------------
 
+// surface.material at path p: "mirror" or a lens (whose back face must lie below h_min).
+inline Material read_material(const json& v, const std::string& p, double h_min) {
+    if (v.is_string() && v.get<std::string>() == "mirror") return Mirror{};
+    if (!v.is_object())
+        throw error(p, "expected \"mirror\" or {\"refractive\": ior, \"thickness\": metres, \"rim\": metres}, got " +
+                           describe(v));
+    const Object m(v, p);
+    static constexpr std::array<std::string_view, 3> lens_keys{"refractive", "thickness", "rim"};
+    m.only(lens_keys, [](const std::string& k) -> std::optional<std::string> {
+        if (k == "mirror") return "a mirror is written \"material\": \"mirror\"";
+        return std::nullopt;
+    });
+    Lens lens;
+    lens.ior = number(m.require("refractive"), m.at("refractive"));
+    if (!(lens.ior > 1)) throw error(m.at("refractive"), "the refractive index must be > 1, got " + format_number(lens.ior));
+    if (const json* t = m.find("thickness")) lens.thickness = positive(*t, m.at("thickness"));
+    if (!(lens.thickness > -h_min))
+        throw error(m.at("thickness"), "must be > " + format_number(-h_min) +
+                                           " (minus surface.height_bounds[0]) so that the flat back face lies below "
+                                           "the lowest height, got " +
+                                           format_number(lens.thickness));
+    if (const json* r = m.find("rim")) {
+        if (r->is_string() && r->get<std::string>() == "auto") lens.rim = -1;
+        else if (r->is_string()) throw error(m.at("rim"), "expected \"auto\" or metres >= 0, got " + describe(*r));
+        else lens.rim = number_in(*r, m.at("rim"), 0, 1);
+    }
+    return lens;
+}
+
 inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base) {
     const Object o(j, "surface");
     static constexpr std::array<std::string_view, 11> keys{"center",   "normal",      "up",     "size",
@@ -360,38 +389,7 @@ inline SurfaceSpec read_surface(const json& j, const std::filesystem::path& base
                                format_number(s.h_max));
     }
     if (const json* v = o.find("aperture")) s.aperture = enumeration(*v, o.at("aperture"), aperture_names);
-    if (const json* v = o.find("material")) {
-        const std::string p = o.at("material");
-        if (v->is_string() && v->get<std::string>() == "mirror") {
-            s.material = Mirror{};
-        } else if (v->is_object()) {
-            const Object m(*v, p);
-            static constexpr std::array<std::string_view, 3> lens_keys{"refractive", "thickness", "rim"};
-            m.only(lens_keys, [](const std::string& k) -> std::optional<std::string> {
-                if (k == "mirror") return "a mirror is written \"material\": \"mirror\"";
-                return std::nullopt;
-            });
-            Lens lens;
-            lens.ior = number(m.require("refractive"), m.at("refractive"));
-            if (!(lens.ior > 1))
-                throw error(m.at("refractive"), "the refractive index must be > 1, got " + format_number(lens.ior));
-            if (const json* t = m.find("thickness")) lens.thickness = positive(*t, m.at("thickness"));
-            if (!(lens.thickness > -s.h_min))
-                throw error(m.at("thickness"), "must be > " + format_number(-s.h_min) +
-                                                   " (minus surface.height_bounds[0]) so that the flat back face "
-                                                   "lies below the lowest height, got " +
-                                                   format_number(lens.thickness));
-            if (const json* r = m.find("rim")) {
-                if (r->is_string() && r->get<std::string>() == "auto") lens.rim = -1;
-                else if (r->is_string()) throw error(m.at("rim"), "expected \"auto\" or metres >= 0, got " + describe(*r));
-                else lens.rim = number_in(*r, m.at("rim"), 0, 1);
-            }
-            s.material = lens;
-        } else {
-            throw error(p, "expected \"mirror\" or {\"refractive\": ior, \"thickness\": metres, \"rim\": metres}, got " +
-                               describe(*v));
-        }
-    }
+    if (const json* v = o.find("material")) s.material = read_material(*v, o.at("material"), s.h_min);
     if (const json* v = o.find("phong_alpha")) s.phong_alpha = number_in(*v, o.at("phong_alpha"), 0, 1);
     if (const json* v = o.find("tool_radius")) s.tool_radius = number_in(*v, o.at("tool_radius"), 0, 1);
     if (const json* v = o.find("initial")) {
