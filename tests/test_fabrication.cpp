@@ -186,7 +186,8 @@ TEST_CASE("the exported mesh traced as flat triangles gives the design's irradia
         s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
         s.receiver.size = {0.2, 0.2};
         REQUIRE(lens_rim(s) > 0);
-        check_exported_matches(s, 51, 0.02);
+        // 0.0018 measured; with the walls of the export at the face's edges, 0.019.
+        check_exported_matches(s, 51, 0.005);
     }
 }
 
