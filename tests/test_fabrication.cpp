@@ -136,6 +136,17 @@ TEST_CASE("the automatic level keeps the exported mesh within its triangle budge
 
 namespace {
 
+// examples/scenes/lens.json's geometry: PMMA, 15 mm of glass, the receiver 0.5 m below and
+// twice the face's width, so the face spreads its light and needs a rim (lens_rim).
+Scene wide_lens_scene() {
+    Scene s = basic_scene(100);
+    s.surface.material = Lens{1.49, 0.015};
+    s.surface.h_min = -0.012, s.surface.h_max = 0.012;
+    s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
+    s.receiver.size = {0.2, 0.2};
+    return s;
+}
+
 // The start of a design (the transport surface) of scene s on an n × n mesh, its
 // irradiance, and the irradiance of its exported facets; checks what issue 13 asks.
 void check_exported_matches(Scene s, int n, double max_l1) {
@@ -181,10 +192,7 @@ TEST_CASE("the exported mesh traced as flat triangles gives the design's irradia
         // The start's edge rays drift past the face's edges inside the glass; the model's
         // walls stand lens_rim beyond them, and so must the exported solid's (export_blank),
         // or those rays would be mirrored back in the export and not in the design.
-        s.surface.material = Lens{1.49, 0.015};
-        s.surface.h_min = -0.012, s.surface.h_max = 0.012;
-        s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
-        s.receiver.size = {0.2, 0.2};
+        s = wide_lens_scene();
         REQUIRE(lens_rim(s) > 0);
         // 0.0018 measured; with the walls of the export at the face's edges, 0.019.
         check_exported_matches(s, 51, 0.005);
@@ -192,11 +200,7 @@ TEST_CASE("the exported mesh traced as flat triangles gives the design's irradia
 }
 
 TEST_CASE("a lens's exported top: the face as designed, the rim continuing its edge slopes, whole cells") {
-    Scene s = basic_scene(100);
-    s.surface.material = Lens{1.49, 0.015};
-    s.surface.h_min = -0.012, s.surface.h_max = 0.012;
-    s.receiver.frame = make_frame({0, 0, -0.5}, {0, 0, 1}, {0, 1, 0}, "receiver");
-    s.receiver.size = {0.2, 0.2};
+    Scene s = wide_lens_scene();
     Heightmap face = surface_for(s, 41);
     shape(face, [](double u, double v) { return 0.002 * std::sin(60 * u) * std::cos(45 * v) + 0.3 * u * v; });
     const double rim = lens_rim(s);
@@ -212,14 +216,17 @@ TEST_CASE("a lens's exported top: the face as designed, the rim continuing its e
     for (int j = 0; j < face.ny(); ++j)
         for (int i = 0; i < face.nx(); ++i) {
             CHECK(top(i + pu, j + pv) == face(i, j));
-            const Vec3 a = top.normals()[std::size_t((j + pv) * top.nx() + i + pu)], b = face.normals()[std::size_t(j * face.nx() + i)];
+            const Vec3 a = top.normals()[std::size_t((j + pv) * top.nx() + i + pu)];
+            const Vec3 b = face.normals()[std::size_t(j * face.nx() + i)];
             normal_change = std::max(normal_change, angle(static_cast<Vec3d>(a), static_cast<Vec3d>(b)));
         }
     CHECK(normal_change < 2e-6);  // the face's edge normals are kept (one-sided = central on a line)
     for (int j = 0; j < top.ny(); ++j)
         for (int i = 1; i + 1 < top.nx(); ++i)
-            if (i < pu || i >= pu + face.nx() - 1)
-                curvature = std::max(curvature, std::abs(double(top(i - 1, j)) - 2 * double(top(i, j)) + double(top(i + 1, j))));
+            if (i < pu || i >= pu + face.nx() - 1) {
+                const double second = double(top(i - 1, j)) - 2 * double(top(i, j)) + double(top(i + 1, j));
+                curvature = std::max(curvature, std::abs(second));
+            }
     CHECK(curvature < 1e-8);  // straight across the rim
     // The solid over it is closed, and wider than the face's by the rim on each side.
     const MeshCheck c = check_mesh(lens_solid(top, std::get<Lens>(s.surface.material), 0.5f, 2));

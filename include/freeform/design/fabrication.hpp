@@ -43,17 +43,16 @@ inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
     const auto at = [&](int i, int j) -> double& { return h[std::size_t(j) * std::size_t(nx) + std::size_t(i)]; };
     for (int j = 0; j < face.ny(); ++j)
         for (int i = 0; i < face.nx(); ++i) at(i + pu, j + pv) = face(i, j);
+    // A line of the top, x(k) its k-th point: n on the face, continued p beyond each end.
+    const auto extend = [](auto&& x, int n, int p) {
+        for (int k = 1; k <= p; ++k) {
+            x(p - k) = x(p) + k * (x(p) - x(p + 1));
+            x(p + n - 1 + k) = x(p + n - 1) + k * (x(p + n - 1) - x(p + n - 2));
+        }
+    };
     // Along u on the face's rows, then along v on every column (the corners continue both).
-    for (int j = pv; j < pv + face.ny(); ++j)
-        for (int k = 1; k <= pu; ++k) {
-            at(pu - k, j) = at(pu, j) + k * (at(pu, j) - at(pu + 1, j));
-            at(pu + face.nx() - 1 + k, j) = at(pu + face.nx() - 1, j) + k * (at(pu + face.nx() - 1, j) - at(pu + face.nx() - 2, j));
-        }
-    for (int i = 0; i < nx; ++i)
-        for (int k = 1; k <= pv; ++k) {
-            at(i, pv - k) = at(i, pv) + k * (at(i, pv) - at(i, pv + 1));
-            at(i, pv + face.ny() - 1 + k) = at(i, pv + face.ny() - 1) + k * (at(i, pv + face.ny() - 1) - at(i, pv + face.ny() - 2));
-        }
+    for (int j = pv; j < pv + face.ny(); ++j) extend([&](int i) -> double& { return at(i, j); }, face.nx(), pu);
+    for (int i = 0; i < nx; ++i) extend([&](int j) -> double& { return at(i, j); }, face.ny(), pv);
     const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
     Heightmap blank(nx, ny, {face.du() * (nx - 1), face.dv() * (ny - 1)}, std::min(double(face.h_min()), *lo),
                     std::max(double(face.h_max()), *hi), face.frame(), Aperture::rect);
