@@ -458,3 +458,41 @@ TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's re
         CHECK(highest >= 19);
     }
 }
+
+TEST_CASE("heights put back inside a small box are applied like a move: the problem follows a rebuilt one") {
+    // A stage that ends by putting its best state back (design/problem.hpp,
+    // replace_heights) retraces only the rays the changed box can affect when the box is
+    // small, and every ray otherwise; both must leave the state a full rebuild gives.
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        Setup s = make_setup(c);
+        SurfaceProblem kept(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("uniform", 7),
+                            1e-4, 1.0);
+        same_moves(5, 400, kept);
+        // A bump inside a 5 x 4 box of vertices: the small-box path.
+        std::vector<float> bumped = s.hm.heights();
+        const int nx = s.hm.nx(), ny = s.hm.ny();
+        for (int j = ny / 2; j < ny / 2 + 4; ++j)
+            for (int i = nx / 3; i < nx / 3 + 5; ++i) bumped[std::size_t(j) * std::size_t(nx) + std::size_t(i)] += 2e-5f;
+        const std::vector<float> before = s.hm.heights();
+        const Histogram histogram_before = kept.histogram();
+        kept.replace_heights(bumped);
+        CHECK(kept.histogram() != histogram_before);  // the bump moved some light
+        Heightmap copy = s.hm;
+        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("uniform", 7),
+                               1e-4, 1.0);
+        CHECK(s.hm.heights() == bumped);
+        CHECK(kept.value().total == rebuilt.value().total);
+        CHECK(kept.histogram() == rebuilt.histogram());
+        CHECK(kept.best_heights() == nullptr);
+        // Its index too: the same moves keep both alike.
+        same_moves(9, 600, kept, rebuilt);
+        CHECK(kept.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+        // Every height changed: the full rebuild's path, to the same end.
+        kept.replace_heights(before);
+        rebuilt.replace_heights(before);
+        CHECK(s.hm.heights() == before);
+        CHECK(kept.value().total == rebuilt.value().total);
+        CHECK(kept.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+    }
+}

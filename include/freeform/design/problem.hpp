@@ -232,7 +232,15 @@ public:
 
     // Sets the surface to `heights` (same mesh) and recomputes everything from them; the
     // state is then its own best. (`heights` may be best_heights_: they are copied first.)
+    //
+    // Heights that differ only inside a small box (a stage putting back its best state
+    // after a few moves) are applied like an accepted move: only the rays that box can
+    // affect are retraced. The state is the one a full rebuild gives, bit for bit (the
+    // trace's invariant, trace/incremental.hpp; the sums are integers, the penalties are
+    // recomputed in full). Under grazing light a rebuild takes seconds, since every ray
+    // crosses some 45 cells; this keeps a short time budget (docs/performance.md).
     void replace_heights(const std::vector<float>& heights) {
+        if (replace_inside_box(heights)) return;
         surface_->set_heights(heights);
         backend_.committed(surface_->full_patch());
         best_heights_.clear();
@@ -240,6 +248,29 @@ public:
     }
 
 private:
+    // replace_heights when the heights change inside a box of at most a quarter of the
+    // vertices; false (nothing done) otherwise.
+    bool replace_inside_box(const std::vector<float>& heights) {
+        Move m;
+        m.overlay.patch = surface_->full_patch();
+        m.overlay.heights = heights;
+        m.overlay.trim(*surface_);  // the box of the heights that differ, and its normals
+        if (4 * m.overlay.patch.count() > surface_->full_patch().count()) return false;
+        if (!m.overlay.empty()) {
+            delta(m);
+            m.overlay.commit(*surface_);
+            backend_.committed(m.overlay.patch);
+            trace_.commit(m.change);
+            image_.apply(m.change.histogram, m.sums);
+        }
+        penalty_sum_ = penalties_->full(*surface_);
+        value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
+        best_is_current_ = true;
+        best_heights_.clear();
+        refresh_error_weights();
+        return true;
+    }
+
     // Every sum the problem maintains, from the irradiance of the current surface.
     void reset_sums(const Histogram& h) {
         image_.reset(h);

@@ -14,6 +14,7 @@
 // records and histogram equal a full retrace bit for bit.
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <exception>
 #include <memory>
@@ -71,6 +72,22 @@ public:
     void assign(std::int32_t ray, std::span<const CellCrossing> cells) {
         store(ray, cells);
         for (const auto& c : cells) cell_rays_[std::size_t(c.cell)].push_back(ray);
+    }
+
+    // Every ray's first assignment at once: for_each_ray(f) calls f(ray, cells) for every
+    // ray in increasing order. The per-cell lists are sized from a count first, so that
+    // they do not grow one push_back at a time: under grazing light (some 45 cells a ray,
+    // 1,400 rays a cell) each list would be copied about ten times as it doubles.
+    // The lists come out as assign() makes them, bit for bit.
+    template <class ForEachRay>
+    void assign_all(ForEachRay&& for_each_ray) {
+        std::vector<std::int32_t> count(cell_rays_.size(), 0);
+        for_each_ray([&](std::int32_t, std::span<const CellCrossing> cells) {
+            for (const auto& c : cells) ++count[std::size_t(c.cell)];
+        });
+        for (std::size_t c = 0; c < cell_rays_.size(); ++c)
+            cell_rays_[c].reserve(cell_rays_[c].size() + std::size_t(count[c]));
+        for_each_ray([&](std::int32_t ray, std::span<const CellCrossing> cells) { assign(ray, cells); });
     }
 
     // Stores a ray's new cells if they are the cells it crossed before (only the height
@@ -158,6 +175,12 @@ private:
 // are short (one to a few cells for most rays): insertion sort.
 inline std::size_t sort_merge_cells(CellCrossing* cells, std::size_t n) {
     if (n < 2) return n;
+    // A path's cells come in the order it crosses them: a path running towards lower rows
+    // comes in descending, the insertion sort's worst case (under grazing light, some 45
+    // cells a ray, the sort was a tenth of a full trace's profile). Reversed first, it is
+    // nearly sorted.
+    // Equal cells are merged by min and max, so their order does not change the result.
+    if (cells[0].cell > cells[n - 1].cell) std::reverse(cells, cells + n);
     for (std::size_t k = 1; k < n; ++k) {
         const CellCrossing x = cells[k];
         std::size_t j = k;
@@ -311,6 +334,34 @@ struct TraceChange : TracePart {
 };
 
 // Maintained per-ray records and ray/cell index for one height field, ray set and scene.
+// Every `stride`-th ray of a set traced as IncrementalTrace::rebuild's scalar path traces
+// it, its cells collected: how many rays, in how many seconds, crossing how many cells.
+// A design with a time budget asks this before it builds a trace it may not afford
+// (design/designer.hpp, the level's start).
+struct RebuildSample {
+    std::int64_t rays = 0;
+    double seconds = 0;
+    std::int64_t crossings = 0;
+};
+
+inline RebuildSample sample_rebuild(const Heightmap& surface, const RaySet& rays, const PathParams& params,
+                                    std::int64_t stride) {
+    const auto t0 = std::chrono::steady_clock::now();
+    RebuildSample s;
+    std::vector<CellCrossing> cells;
+    const HeightfieldView hf = surface.view();
+    for (std::int64_t k = 0; k < rays.size(); k += std::max<std::int64_t>(stride, 1)) {
+        cells.clear();
+        CellCollector visit{&cells, 0, surface.nx() - 1};
+        trace_heightfield_ray(hf, params, rays.origin[std::size_t(k)], rays.direction[std::size_t(k)], visit);
+        visit.finish();
+        s.crossings += std::int64_t(cells.size());
+        ++s.rays;
+    }
+    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return s;
+}
+
 class IncrementalTrace {
 public:
     IncrementalTrace(const Heightmap& surface, const RaySet& rays, const PathParams& params)
@@ -338,6 +389,17 @@ public:
         for_each_chunk(policy, n, chunks, [&](int c, std::int64_t begin, std::int64_t end) {
             auto& cells = chunk_cells[std::size_t(c)];
             auto& starts = chunk_begin[std::size_t(c)];
+            starts.reserve(std::size_t(end - begin + 1));
+            // Room for the chunk's cells, from the rays of its first thirty-second: the
+            // vector then grows once, not by doubling (each doubling copies it and faults
+            // in new pages; under grazing light the chunk holds hundreds of megabytes).
+            const std::int64_t probe = begin + std::max<std::int64_t>(256, (end - begin) / 32);
+            bool sized = false;
+            const auto size_from_probe = [&](std::int64_t done) {
+                if (sized || done < probe || done >= end) return;
+                sized = true;
+                cells.reserve(std::size_t(1.1 * double(cells.size()) * double(end - begin) / double(done - begin)) + 64);
+            };
 #if !defined(__CUDACC__)
             if (packet::use_packets(params_)) {
                 auto lanes = std::make_unique<LaneCellBuffer>();
@@ -351,6 +413,7 @@ public:
                         starts.push_back(std::int64_t(cells.size()));
                         append_lane_cells(hf, *lanes, l, o[l], d[l], records_[std::size_t(k0 + l)], cells);
                     }
+                    size_from_probe(k0 + count);
                 }
                 starts.push_back(std::int64_t(cells.size()));
                 return;
@@ -362,20 +425,23 @@ public:
                 records_[std::size_t(k)] = trace_heightfield_ray(hf, params_, rays_->origin[std::size_t(k)],
                                                                  rays_->direction[std::size_t(k)], visit);
                 visit.finish();
+                size_from_probe(k + 1);
             }
             starts.push_back(std::int64_t(cells.size()));
         });
         std::size_t crossings = 0;
         for (const auto& cells : chunk_cells) crossings += cells.size();
         index_.reserve(crossings);
-        for (int c = 0; c < chunks; ++c) {
-            const std::int64_t begin = n * c / chunks;
-            const auto& cells = chunk_cells[std::size_t(c)];
-            const auto& starts = chunk_begin[std::size_t(c)];
-            for (std::size_t k = 0; k + 1 < starts.size(); ++k)
-                index_.assign(std::int32_t(begin + std::int64_t(k)),
-                              std::span(cells.data() + starts[k], std::size_t(starts[k + 1] - starts[k])));
-        }
+        index_.assign_all([&](auto&& f) {
+            for (int c = 0; c < chunks; ++c) {
+                const std::int64_t begin = n * c / chunks;
+                const auto& cells = chunk_cells[std::size_t(c)];
+                const auto& starts = chunk_begin[std::size_t(c)];
+                for (std::size_t k = 0; k + 1 < starts.size(); ++k)
+                    f(std::int32_t(begin + std::int64_t(k)),
+                      std::span(cells.data() + starts[k], std::size_t(starts[k + 1] - starts[k])));
+            }
+        });
         recount_status_weights();
         return histogram();
     }

@@ -1,0 +1,62 @@
+// The time budget's guard (design/designer.hpp, Designer::trace_affordable): a level is
+// annealed only when the budget left affords building its trace. A budget the start has
+// already used up must therefore leave every level out, and the result must still
+// describe the surface it returns, at the final mesh, exactly as a fresh trace does.
+// (How long designs take is measured in benchmarks/, never asserted here.)
+#include <doctest/doctest.h>
+
+#include <string>
+
+#include <freeform/design/designer.hpp>
+
+#include "support.hpp"
+
+using namespace freeform;
+using namespace freeform::testing;
+
+TEST_CASE("a budget the start used up: no level is annealed, and the result describes the start at the final mesh") {
+    Scene scene = basic_scene(32, 4);
+    ImageD target = two_blocks(32, 32);
+    DesignOptions o;
+    o.time_budget = 1e-9;  // gone before the first level begins
+    o.seed = 5;
+    o.threads = 1;
+    LevelPlan coarse, fine;
+    coarse.mesh_x = coarse.mesh_y = 9;
+    coarse.resolution_x = coarse.resolution_y = 16;
+    coarse.kernel_supports = {5};
+    coarse.iterations = 500;
+    fine.mesh_x = fine.mesh_y = 17;
+    fine.resolution_x = fine.resolution_y = 32;
+    fine.kernel_supports = {5, 3};
+    fine.iterations = 500;
+    o.levels = {coarse, fine};
+    Heightmap start = surface_for(scene, 17);
+    shape(start, [](double u, double v) { return 0.05 * u * u - 0.03 * u * v; });
+    const DesignResult r = design(scene, start, target, o, [](const DesignProgress&) { return false; });
+
+    CHECK(r.iterations == 0);
+    CHECK(r.stages.empty());
+    CHECK(r.start.levels_planned == 2);
+    CHECK(r.start.levels_used == 0);
+    CHECK(r.start.plan.find("level 1 of 2 not annealed") != std::string::npos);
+    REQUIRE(r.surface.nx() == 17);
+    REQUIRE(r.surface.ny() == 17);
+
+    // The surface returned is the start (refined to the coarse level's mesh and back):
+    // its irradiance and objective are those a fresh trace and a fresh problem give.
+    const RaySet rays = generate_rays(scene.light, r.surface, scene.receiver, o.seed);
+    CHECK(r.rays == rays.size());
+    CHECK(r.irradiance == trace_scene(scene, r.surface, rays).histogram);
+    Heightmap copy = r.surface;
+    const Penalties penalties = default_penalties(o);
+    const PathParams pp = make_path_params(scene);
+    ProposalSettings ps;
+    ps.bank = default_kernel_bank(5);
+    SurfaceProblem fresh(copy, rays, pp, make_target(target, 32, 32, target_total(rays, pp)),
+                         {o.sobel_weight, o.energy_threshold, o.lost_light_weight}, penalties, ps,
+                         make_bandit(BanditKind::uniform, int(ps.bank.size())), 1.0, 1.0);
+    CHECK(r.value.total == fresh.value().total);
+    CHECK(r.value.error == fresh.value().error);
+    CHECK(r.held_out.total >= 0);  // judged on the final level's held-out rays as well
+}
