@@ -596,7 +596,9 @@ class Designer {
         const double left = options_.time_budget - clock_();
         if (2 * build <= left) return true;
         result_.start.levels_used = int(L.index);
-        result_.start.plan += "; level " + std::to_string(L.index + 1) + " of " + std::to_string(levels_.size()) +
+        const std::size_t after = levels_.size() - L.index - 1;
+        result_.start.plan += "; the " + std::to_string(L.plan->mesh_x) + " x " + std::to_string(L.plan->mesh_y) +
+                              " level" + (after > 0 ? " and the " + std::to_string(after) + " after it" : "") +
                               " not annealed: building its trace would take about " + one_decimal(build) +
                               " s of the " + one_decimal(std::max(left, 0.0)) + " s left";
         stop_ = true;
