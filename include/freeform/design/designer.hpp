@@ -86,7 +86,7 @@ struct DesignResult {
     std::int64_t iterations = 0;
     std::int64_t accepted = 0;
     double seconds = 0;
-    double tool_cut = 0;       // surface.tool_radius: the most height the tool's cut added (metres)
+    double tool_cut = 0;       // surface.tool_radius: the most height the tool's cut added (metres; set by finish_design)
     bool stopped_early = false;  // a callback stopped it (e.g. Ctrl-C): the best so far is kept
     std::vector<StageReport> stages;
     std::vector<ConvergencePoint> convergence;
@@ -507,10 +507,9 @@ class Designer {
     DesignResult run(Heightmap initial) {
         schedule(std::move(initial));
         for (std::size_t li = 0; li < levels_.size() && !stop_; ++li) run_level(li);
-        // The milling tool's constraint, made exact: what a ball of the tool's radius
-        // leaves (result.irradiance and value describe the surface before this cut;
-        // finish_design traces the cut surface again for every figure it reports).
-        if (scene_.surface.tool_radius > 0) result_.tool_cut = cut_with_ball(surface_, scene_.surface.tool_radius);
+        // The annealed surface, as the annealer left it: smoothing and the milling tool's
+        // cut are finishing, done once, by finish_design (pipeline.hpp), which then judges
+        // the finished surface for every figure it reports.
         result_.surface = std::move(surface_);
         result_.iterations = total_iterations_;
         result_.seconds = clock_();
