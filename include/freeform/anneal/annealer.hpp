@@ -598,8 +598,6 @@ private:
             }
     }
 
-    // Runs one window of iterations (one iteration when not speculative); true when a
-    // callback asked to stop.
     // Speculation pays only when a delta costs much more than waking the other threads,
     // and not at all when the machine has no idle core for them. Since the trajectory is
     // the same for every window size, the run measures both and keeps the faster: it
@@ -633,9 +631,38 @@ private:
         return stop;
     }
 
+    // Runs one window of iterations (one iteration when not speculative); true when a
+    // callback asked to stop.
     template <class... Cs>
     bool step_window(Cs&... callbacks) {
         const std::int64_t first = iteration_;
+        const int count = propose_window(first);
+        const int taken = first_accepted(first, count);
+        const int done = taken >= 0 ? taken + 1 : count;
+        last_window_iterations_ = done;
+        iteration_ = first + done;
+        batch_iterations_ += done;
+        // Every iteration but an accepted new best extends the run without improvement.
+        since_best_ += done;
+        since_reheat_ += done;
+
+        bool stop = false;
+        if (taken >= 0) accept_move(taken, stop, callbacks...);
+        if (iteration_ == next_batch_) end_batch(stop, callbacks...);
+        if (options_.patience > 0 && since_reheat_ >= options_.patience) reheat();
+        if (iteration_ == next_exchange_) run_exchange(stop, callbacks...);
+        if (iteration_ == next_progress_) {
+            last_progress_ = iteration_;
+            next_progress_ += options_.progress_every;
+            const AnnealState s = state();
+            call_each(stop, [&](auto& c) { return hook_progress(c, s); }, callbacks...);
+        }
+        return stop;
+    }
+
+    // Proposes and evaluates the moves of the window that starts at iteration `first`;
+    // returns how many there are.
+    int propose_window(std::int64_t first) {
         const std::int64_t end = window_end();
         int count = 0;
         for (std::int64_t j = first; j < end; ++j) {
@@ -649,97 +676,91 @@ private:
             problem_.propose(rng, temperatures_[k], moves_[k]);
         }
         evaluate(count);
+        return count;
+    }
 
-        int taken = -1;
+    // The first of the window's `count` moves that the Metropolis rule accepts (the ones
+    // before it are rejected), or -1 when none is.
+    int first_accepted(std::int64_t first, int count) {
         for (int k = 0; k < count; ++k) {
-            if (metropolis(first + k, deltas_[k], temperatures_[k])) {
-                taken = k;
-                break;
-            }
+            if (metropolis(first + k, deltas_[k], temperatures_[k])) return k;
             problem_.reject(moves_[k]);
         }
-        const int done = taken >= 0 ? taken + 1 : count;
-        last_window_iterations_ = done;
-        iteration_ = first + done;
-        batch_iterations_ += done;
-        // Every iteration but an accepted new best extends the run without improvement.
-        since_best_ += done;
-        since_reheat_ += done;
+        return -1;
+    }
 
-        bool stop = false;
-        if (taken >= 0) {
-            if constexpr (requires(typename Problem::Move& m, TaskPool* pool) { problem_.accept(m, pool); })
-                problem_.accept(moves_[taken], pool_.get());
-            else
-                problem_.accept(moves_[taken]);
-            energy_ = static_cast<double>(problem_.energy());
-            ++accepted_;
-            ++batch_accepted_;
-            batch_delta_sum_ += deltas_[taken];
-            if (energy_ < best_) {
-                best_ = energy_;
-                since_best_ = 0;
-                since_reheat_ = 0;
-                if constexpr (HasOnNewBest<Problem>) problem_.on_new_best();
-                const AnnealState s = state();
-                call_each(stop, [&](auto& c) { return hook_new_best(c, s); }, callbacks...);
-            }
-        }
-
-        if (iteration_ == next_batch_) {
-            if constexpr (HasSync<Problem>) problem_.sync();
-            BatchStats b;
-            b.iteration = iteration_;
-            b.iterations = batch_iterations_;
-            b.accepted = batch_accepted_;
-            b.acceptance_rate = batch_iterations_ > 0 ? double(batch_accepted_) / double(batch_iterations_) : 0.0;
-            b.mean_accepted_delta = batch_accepted_ > 0 ? batch_delta_sum_ / double(batch_accepted_) : 0.0;
-            b.temperature = temperature_at(iteration_);
-            call_each(stop, [&](auto& c) { return hook_batch(c, b); }, callbacks...);
-            batch_iterations_ = batch_accepted_ = 0;
-            batch_delta_sum_ = 0;
-            if constexpr (HasSyncInterval<Problem>) {
-                const auto interval = static_cast<std::int64_t>(problem_.sync_interval());
-                next_batch_ = interval > 0 ? iteration_ + interval : never;
-            } else {
-                next_batch_ = iteration_ + options_.batch_iterations;
-            }
-        }
-
-        if (options_.patience > 0 && since_reheat_ >= options_.patience) {
-            pass_t0_ = reheat_temperature(schedule_, pass_t0_, options_.reheat_factor);
-            pass_start_ = iteration_;
-            cached_step_ = -1;
+    // Applies the window's accepted move `taken`, and tells the callbacks of a new best.
+    template <class... Cs>
+    void accept_move(int taken, bool& stop, Cs&... callbacks) {
+        if constexpr (requires(typename Problem::Move& m, TaskPool* pool) { problem_.accept(m, pool); })
+            problem_.accept(moves_[taken], pool_.get());
+        else
+            problem_.accept(moves_[taken]);
+        energy_ = static_cast<double>(problem_.energy());
+        ++accepted_;
+        ++batch_accepted_;
+        batch_delta_sum_ += deltas_[taken];
+        if (energy_ < best_) {
+            best_ = energy_;
+            since_best_ = 0;
             since_reheat_ = 0;
-            ++reheats_;
-        }
-
-        if (iteration_ == next_exchange_) {
-            next_exchange_ += options_.exchange_every;
-            AnnealExchange x;
-            x.state = state();
-            x.temperature_scale = scale_;
-            call_each(stop, [&](auto& c) { return hook_exchange(c, x); }, callbacks...);
-            if (!(std::isfinite(x.temperature_scale) && x.temperature_scale > 0))
-                throw InputError("anneal: an exchange hook set temperature_scale to " +
-                                 option_value(x.temperature_scale) + "; it must be a finite number > 0");
-            if (x.temperature_scale != scale_) {
-                scale_ = x.temperature_scale;
-                cached_step_ = -1;
-            }
-            if (x.state_replaced) {
-                energy_ = static_cast<double>(problem_.energy());
-                best_ = energy_;
-            }
-        }
-
-        if (iteration_ == next_progress_) {
-            last_progress_ = iteration_;
-            next_progress_ += options_.progress_every;
+            if constexpr (HasOnNewBest<Problem>) problem_.on_new_best();
             const AnnealState s = state();
-            call_each(stop, [&](auto& c) { return hook_progress(c, s); }, callbacks...);
+            call_each(stop, [&](auto& c) { return hook_new_best(c, s); }, callbacks...);
         }
-        return stop;
+    }
+
+    // At the end of a batch: syncs the problem, reports the batch's statistics and
+    // starts the next batch.
+    template <class... Cs>
+    void end_batch(bool& stop, Cs&... callbacks) {
+        if constexpr (HasSync<Problem>) problem_.sync();
+        BatchStats b;
+        b.iteration = iteration_;
+        b.iterations = batch_iterations_;
+        b.accepted = batch_accepted_;
+        b.acceptance_rate = batch_iterations_ > 0 ? double(batch_accepted_) / double(batch_iterations_) : 0.0;
+        b.mean_accepted_delta = batch_accepted_ > 0 ? batch_delta_sum_ / double(batch_accepted_) : 0.0;
+        b.temperature = temperature_at(iteration_);
+        call_each(stop, [&](auto& c) { return hook_batch(c, b); }, callbacks...);
+        batch_iterations_ = batch_accepted_ = 0;
+        batch_delta_sum_ = 0;
+        if constexpr (HasSyncInterval<Problem>) {
+            const auto interval = static_cast<std::int64_t>(problem_.sync_interval());
+            next_batch_ = interval > 0 ? iteration_ + interval : never;
+        } else {
+            next_batch_ = iteration_ + options_.batch_iterations;
+        }
+    }
+
+    // The patience rule: a new cooling pass from a raised temperature.
+    void reheat() {
+        pass_t0_ = reheat_temperature(schedule_, pass_t0_, options_.reheat_factor);
+        pass_start_ = iteration_;
+        cached_step_ = -1;
+        since_reheat_ = 0;
+        ++reheats_;
+    }
+
+    // Calls the exchange hooks, which may rescale the temperature or replace the state.
+    template <class... Cs>
+    void run_exchange(bool& stop, Cs&... callbacks) {
+        next_exchange_ += options_.exchange_every;
+        AnnealExchange x;
+        x.state = state();
+        x.temperature_scale = scale_;
+        call_each(stop, [&](auto& c) { return hook_exchange(c, x); }, callbacks...);
+        if (!(std::isfinite(x.temperature_scale) && x.temperature_scale > 0))
+            throw InputError("anneal: an exchange hook set temperature_scale to " + option_value(x.temperature_scale) +
+                             "; it must be a finite number > 0");
+        if (x.temperature_scale != scale_) {
+            scale_ = x.temperature_scale;
+            cached_step_ = -1;
+        }
+        if (x.state_replaced) {
+            energy_ = static_cast<double>(problem_.energy());
+            best_ = energy_;
+        }
     }
 
     Problem& problem_;

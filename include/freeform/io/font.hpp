@@ -152,6 +152,105 @@ inline bool font_directory_fits(std::string_view b) {
     return true;
 }
 
+// A glyph laid out in font units with y pointing down (image convention).
+struct PlacedGlyph {
+    int glyph;
+    double pen_x, baseline;
+};
+
+// Lays the glyphs of `codepoints` out line by line, each line centred on x = 0 by its
+// advance width. Throws IoError naming `font_file` for a codepoint the font lacks.
+inline std::vector<PlacedGlyph> place_glyphs(const stbtt_fontinfo& font, const std::vector<char32_t>& codepoints,
+                                             const std::filesystem::path& font_file) {
+    int ascent = 0, descent = 0, line_gap = 0;
+    stbtt_GetFontVMetrics(&font, &ascent, &descent, &line_gap);
+    const double line_advance = double(ascent - descent + line_gap);
+
+    std::vector<PlacedGlyph> placed;
+    std::size_t line_start = 0;
+    double pen = 0, baseline = 0;
+    int previous = 0;
+    const auto finish_line = [&] {
+        // Centre the line on x = 0 by its advance width.
+        for (std::size_t k = line_start; k < placed.size(); ++k) placed[k].pen_x -= pen / 2;
+        line_start = placed.size();
+    };
+    for (char32_t cp : codepoints) {
+        if (cp == U'\r') continue;
+        if (cp == U'\n') {
+            finish_line();
+            pen = 0;
+            previous = 0;
+            baseline += line_advance;
+            continue;
+        }
+        const int glyph = stbtt_FindGlyphIndex(&font, int(cp == U'\t' ? U' ' : cp));
+        if (glyph == 0) throw IoError("font '" + font_file.string() + "' has no glyph for " + codepoint_name(cp));
+        if (previous) pen += stbtt_GetGlyphKernAdvance(&font, previous, glyph);
+        placed.push_back({glyph, pen, baseline});
+        int advance = 0, bearing = 0;
+        stbtt_GetGlyphHMetrics(&font, glyph, &advance, &bearing);
+        pen += advance;
+        previous = glyph;
+    }
+    finish_line();
+    return placed;
+}
+
+// The bounding box of the glyph outlines' ink, in the layout's font units (empty, with
+// x0 > x1, when no glyph has ink).
+struct InkBox {
+    static constexpr double inf = std::numeric_limits<double>::infinity();
+    double x0 = inf, y0 = inf;
+    double x1 = -inf, y1 = -inf;
+};
+
+inline InkBox ink_box(const stbtt_fontinfo& font, const std::vector<PlacedGlyph>& placed) {
+    InkBox ink;
+    for (const PlacedGlyph& g : placed) {
+        int x0, y0, x1, y1;
+        if (stbtt_IsGlyphEmpty(&font, g.glyph) || !stbtt_GetGlyphBox(&font, g.glyph, &x0, &y0, &x1, &y1)) continue;
+        ink.x0 = std::min(ink.x0, g.pen_x + x0);
+        ink.x1 = std::max(ink.x1, g.pen_x + x1);
+        ink.y0 = std::min(ink.y0, g.baseline - y1);
+        ink.y1 = std::max(ink.y1, g.baseline - y0);
+    }
+    return ink;
+}
+
+// Adds the antialiased coverage of the placed glyphs to `img`, font units mapped to
+// pixels as scale · p + shift; the parts outside the image are dropped.
+inline void draw_glyphs(const stbtt_fontinfo& font, const std::vector<PlacedGlyph>& placed, double scale,
+                        double shift_x, double shift_y, ImageF& img) {
+    const long long width = img.cols(), height = img.rows();
+    const auto s = static_cast<float>(scale);
+    std::vector<unsigned char> bitmap;
+    for (const PlacedGlyph& g : placed) {
+        if (stbtt_IsGlyphEmpty(&font, g.glyph)) continue;
+        const double origin_x = shift_x + scale * g.pen_x, origin_y = shift_y + scale * g.baseline;
+        const double base_x = std::floor(origin_x), base_y = std::floor(origin_y);
+        const auto sub_x = static_cast<float>(origin_x - base_x), sub_y = static_cast<float>(origin_y - base_y);
+        int ix0, iy0, ix1, iy1;
+        stbtt_GetGlyphBitmapBoxSubpixel(&font, g.glyph, s, s, sub_x, sub_y, &ix0, &iy0, &ix1, &iy1);
+        const int bw = ix1 - ix0, bh = iy1 - iy0;
+        if (bw <= 0 || bh <= 0) continue;
+        bitmap.assign(std::size_t(bw) * std::size_t(bh), 0);
+        stbtt_MakeGlyphBitmapSubpixel(&font, bitmap.data(), bw, bh, bw, s, s, sub_x, sub_y, g.glyph);
+        const long long left = static_cast<long long>(base_x) + ix0, top = static_cast<long long>(base_y) + iy0;
+        for (int j = 0; j < bh; ++j) {
+            const long long y = top + j;
+            if (y < 0 || y >= height) continue;
+            for (int i = 0; i < bw; ++i) {
+                const long long x = left + i;
+                if (x < 0 || x >= width) continue;
+                // Abutting glyph edges add up; overlaps saturate.
+                float& cell = img(Eigen::Index(y), Eigen::Index(x));
+                cell = std::min(1.0f, cell + bitmap[std::size_t(j) * bw + i] / 255.0f);
+            }
+        }
+    }
+}
+
 }  // namespace detail
 
 // Renders UTF-8 `text` ('\n' separates lines, each centred) as white antialiased
@@ -176,90 +275,19 @@ inline ImageF render_text(const std::string& text, const std::filesystem::path& 
     if (offset < 0 || !stbtt_InitFont(&font, font_data, offset))
         throw IoError("cannot load font '" + font_file.string() + "': not a TrueType/OpenType font");
 
-    // Lay the glyphs out in font units with y pointing down (image convention).
-    struct Placed {
-        int glyph;
-        double pen_x, baseline;
-    };
-    int ascent = 0, descent = 0, line_gap = 0;
-    stbtt_GetFontVMetrics(&font, &ascent, &descent, &line_gap);
-    const double line_advance = double(ascent - descent + line_gap);
-
-    std::vector<Placed> placed;
-    double ink_x0 = std::numeric_limits<double>::infinity(), ink_y0 = ink_x0;
-    double ink_x1 = -ink_x0, ink_y1 = -ink_x0;
-    std::size_t line_start = 0;
-    double pen = 0, baseline = 0;
-    int previous = 0;
-    const auto finish_line = [&] {
-        // Centre the line on x = 0 by its advance width.
-        for (std::size_t k = line_start; k < placed.size(); ++k) placed[k].pen_x -= pen / 2;
-        line_start = placed.size();
-    };
-    for (char32_t cp : codepoints) {
-        if (cp == U'\r') continue;
-        if (cp == U'\n') {
-            finish_line();
-            pen = 0;
-            previous = 0;
-            baseline += line_advance;
-            continue;
-        }
-        const int glyph = stbtt_FindGlyphIndex(&font, int(cp == U'\t' ? U' ' : cp));
-        if (glyph == 0)
-            throw IoError("font '" + font_file.string() + "' has no glyph for " + detail::codepoint_name(cp));
-        if (previous) pen += stbtt_GetGlyphKernAdvance(&font, previous, glyph);
-        placed.push_back({glyph, pen, baseline});
-        int advance = 0, bearing = 0;
-        stbtt_GetGlyphHMetrics(&font, glyph, &advance, &bearing);
-        pen += advance;
-        previous = glyph;
-    }
-    finish_line();
-    for (const Placed& g : placed) {
-        int x0, y0, x1, y1;
-        if (stbtt_IsGlyphEmpty(&font, g.glyph) || !stbtt_GetGlyphBox(&font, g.glyph, &x0, &y0, &x1, &y1)) continue;
-        ink_x0 = std::min(ink_x0, g.pen_x + x0);
-        ink_x1 = std::max(ink_x1, g.pen_x + x1);
-        ink_y0 = std::min(ink_y0, g.baseline - y1);
-        ink_y1 = std::max(ink_y1, g.baseline - y0);
-    }
-    if (!(ink_x1 > ink_x0) || !(ink_y1 > ink_y0))
+    const std::vector<detail::PlacedGlyph> placed = detail::place_glyphs(font, codepoints, font_file);
+    const detail::InkBox ink = detail::ink_box(font, placed);
+    if (!(ink.x1 > ink.x0) || !(ink.y1 > ink.y0))
         throw IoError("text '" + text + "' renders no ink with font '" + font_file.string() + "'");
 
     // The slight shrink keeps rounding from pushing antialiased edges into the margin.
     const double fit_w = width * (1 - 2 * margin), fit_h = height * (1 - 2 * margin);
-    const double scale = std::min(fit_w / (ink_x1 - ink_x0), fit_h / (ink_y1 - ink_y0)) * (1 - 1e-6);
-    const double shift_x = width / 2.0 - scale * (ink_x0 + ink_x1) / 2;
-    const double shift_y = height / 2.0 - scale * (ink_y0 + ink_y1) / 2;
-    const auto s = static_cast<float>(scale);
+    const double scale = std::min(fit_w / (ink.x1 - ink.x0), fit_h / (ink.y1 - ink.y0)) * (1 - 1e-6);
+    const double shift_x = width / 2.0 - scale * (ink.x0 + ink.x1) / 2;
+    const double shift_y = height / 2.0 - scale * (ink.y0 + ink.y1) / 2;
 
     ImageF img = ImageF::Zero(height, width);
-    std::vector<unsigned char> bitmap;
-    for (const Placed& g : placed) {
-        if (stbtt_IsGlyphEmpty(&font, g.glyph)) continue;
-        const double origin_x = shift_x + scale * g.pen_x, origin_y = shift_y + scale * g.baseline;
-        const double base_x = std::floor(origin_x), base_y = std::floor(origin_y);
-        const auto sub_x = static_cast<float>(origin_x - base_x), sub_y = static_cast<float>(origin_y - base_y);
-        int ix0, iy0, ix1, iy1;
-        stbtt_GetGlyphBitmapBoxSubpixel(&font, g.glyph, s, s, sub_x, sub_y, &ix0, &iy0, &ix1, &iy1);
-        const int bw = ix1 - ix0, bh = iy1 - iy0;
-        if (bw <= 0 || bh <= 0) continue;
-        bitmap.assign(std::size_t(bw) * std::size_t(bh), 0);
-        stbtt_MakeGlyphBitmapSubpixel(&font, bitmap.data(), bw, bh, bw, s, s, sub_x, sub_y, g.glyph);
-        const long long left = static_cast<long long>(base_x) + ix0, top = static_cast<long long>(base_y) + iy0;
-        for (int j = 0; j < bh; ++j) {
-            const long long y = top + j;
-            if (y < 0 || y >= height) continue;
-            for (int i = 0; i < bw; ++i) {
-                const long long x = left + i;
-                if (x < 0 || x >= width) continue;
-                // Abutting glyph edges add up; overlaps saturate.
-                float& cell = img(Eigen::Index(y), Eigen::Index(x));
-                cell = std::min(1.0f, cell + bitmap[std::size_t(j) * bw + i] / 255.0f);
-            }
-        }
-    }
+    detail::draw_glyphs(font, placed, scale, shift_x, shift_y, img);
     if (!(img.maxCoeff() > 0))
         throw IoError("text '" + text + "' renders no ink with font '" + font_file.string() + "' at " +
                       std::to_string(width) + " x " + std::to_string(height));

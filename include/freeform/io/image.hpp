@@ -69,6 +69,110 @@ inline void write_png_pixels(const std::filesystem::path& file, const std::uint8
     write_file_atomically(file, encoded);
 }
 
+// Big-endian reads of the file's bytes; the callers check the bounds.
+inline unsigned image_byte(std::string_view b, std::size_t k) { return static_cast<unsigned char>(b[k]); }
+inline std::size_t image_be16(std::string_view b, std::size_t k) {
+    return std::size_t(image_byte(b, k)) << 8 | image_byte(b, k + 1);
+}
+inline std::size_t image_be32(std::string_view b, std::size_t k) {
+    return image_be16(b, k) << 16 | image_be16(b, k + 2);
+}
+
+// A PNG: every chunk inside the file, no empty IDAT.
+inline std::string png_structure_problem(std::string_view b) {
+    for (std::size_t at = 8; at < b.size();) {
+        if (b.size() - at < 12 || image_be32(b, at) > b.size() - at - 12)
+            return "a PNG chunk runs past the end of the file";
+        const std::size_t length = image_be32(b, at);
+        if (b.substr(at + 4, 4) == "IDAT" && length == 0) return "an empty PNG IDAT chunk";
+        if (b.substr(at + 4, 4) == "IEND") break;
+        at += 12 + length;
+    }
+    return "";
+}
+
+// The Huffman tables of a JPEG DHT segment (`length` bytes from `at`, marker excluded):
+// each inside the segment, with at most 256 codes. Marks the tables it defines in
+// `defined` (bit k: DC (0) / AC (1) Huffman table k).
+inline std::string jpeg_huffman_problem(std::string_view b, std::size_t at, std::size_t length,
+                                        unsigned (&defined)[2]) {
+    for (std::size_t t = at + 4; t < at + 2 + length;) {
+        if (t + 17 > at + 2 + length) return "a truncated JPEG Huffman table";
+        std::size_t codes = 0;
+        for (std::size_t k = 1; k <= 16; ++k) codes += image_byte(b, t + k);
+        if (codes > 256) return "a JPEG Huffman table with more than 256 codes";
+        const unsigned c = image_byte(b, t);
+        if ((c >> 4) <= 1 && (c & 15) <= 3) defined[c >> 4] |= 1u << (c & 15);
+        t += 17 + codes;
+        if (t > at + 2 + length) return "a truncated JPEG Huffman table";
+    }
+    return "";
+}
+
+// A JPEG SOS segment (at `at`, `length` bytes): a scan decodes with tables it names; stb
+// reads an undefined one from uninitialised memory. Baseline scans use both; a
+// progressive scan the DC table (first DC pass) or the AC table (spectral bands above 0).
+inline std::string jpeg_scan_problem(std::string_view b, std::size_t at, std::size_t length, bool progressive,
+                                     const unsigned (&defined)[2]) {
+    const std::size_t count = length >= 3 ? image_byte(b, at + 4) : 0;
+    if (length < 6 + 2 * count) return "a truncated JPEG scan header";
+    const std::size_t after = at + 5 + 2 * count;
+    const bool dc_scan = image_byte(b, after) == 0, first_pass = (image_byte(b, after + 2) >> 4) == 0;
+    for (std::size_t c = 0; c < count; ++c) {
+        const unsigned dc = image_byte(b, at + 6 + 2 * c) >> 4, ac = image_byte(b, at + 6 + 2 * c) & 15;
+        const bool need_dc = !progressive || (dc_scan && first_pass), need_ac = !progressive || !dc_scan;
+        if ((need_dc && (dc > 3 || !(defined[0] >> dc & 1))) || (need_ac && (ac > 3 || !(defined[1] >> ac & 1))))
+            return "a JPEG scan that uses an undefined Huffman table";
+    }
+    return "";
+}
+
+// A JPEG: walk the markers (and past entropy-coded data) to every Huffman table and scan.
+inline std::string jpeg_structure_problem(std::string_view b) {
+    std::size_t at = 2;
+    bool progressive = false;
+    unsigned defined[2] = {0, 0};  // bit k: DC (0) / AC (1) Huffman table k seen so far
+    while (at + 4 <= b.size()) {
+        if (image_byte(b, at) != 0xFF) {  // entropy-coded data: up to the next real marker
+            ++at;
+            continue;
+        }
+        const unsigned marker = image_byte(b, at + 1);
+        if (marker == 0xFF || marker == 0x00 || (marker >= 0xD0 && marker <= 0xD8) || marker == 0x01) {
+            at += marker == 0xFF ? 1 : 2;
+            continue;
+        }
+        if (marker == 0xD9) break;  // end of image
+        const std::size_t length = image_be16(b, at + 2);
+        if (length < 2 || at + 2 + length > b.size()) return "a JPEG segment runs past the end of the file";
+        if (marker == 0xC4)
+            if (std::string problem = jpeg_huffman_problem(b, at, length, defined); !problem.empty()) return problem;
+        if (marker >= 0xC0 && marker <= 0xC2) progressive = marker == 0xC2;
+        if (marker == 0xDA)
+            if (std::string problem = jpeg_scan_problem(b, at, length, progressive, defined); !problem.empty())
+                return problem;
+        at += 2 + length;
+    }
+    return "";
+}
+
+// A binary PGM/PPM: width, height and maximum value, plain numbers that fit an int.
+inline std::string pnm_structure_problem(std::string_view b) {
+    std::size_t at = 2;
+    for (int field = 0; field < 3; ++field) {
+        while (at < b.size() && (std::isspace(image_byte(b, at)) || b[at] == '#')) {
+            if (b[at] == '#')
+                while (at < b.size() && b[at] != '\n' && b[at] != '\r') ++at;
+            else
+                ++at;
+        }
+        std::size_t digits = 0;
+        while (at < b.size() && std::isdigit(image_byte(b, at))) ++at, ++digits;
+        if (digits == 0 || digits > 9) return "a PNM header with a missing or oversized number";
+    }
+    return "";
+}
+
 // What stb_image is trusted to decode. Its decoders (Debian's libstb, v2.27) have known
 // memory errors on crafted files, found by fuzzing (tests/fuzz/regressions/image): a
 // JPEG Huffman table whose code counts exceed 256 writes past a 257-entry array, a PNG
@@ -79,85 +183,10 @@ inline void write_png_pixels(const std::filesystem::path& file, const std::uint8
 // formats nobody designs a target in (PSD, GIF, TGA, PIC, and HDR, whose linear values
 // PFM carries) are not passed to it at all. Returns the reason a file is refused, or "" to decode it.
 inline std::string image_structure_problem(std::string_view b) {
-    const auto byte = [&](std::size_t k) { return static_cast<unsigned char>(b[k]); };
-    const auto be16 = [&](std::size_t k) { return std::size_t(byte(k)) << 8 | byte(k + 1); };
-    const auto be32 = [&](std::size_t k) { return be16(k) << 16 | be16(k + 2); };
-    if (b.substr(0, 8) == std::string_view("\x89PNG\r\n\x1a\n", 8)) {
-        // Every chunk inside the file, no empty IDAT.
-        for (std::size_t at = 8; at < b.size();) {
-            if (b.size() - at < 12 || be32(at) > b.size() - at - 12) return "a PNG chunk runs past the end of the file";
-            const std::size_t length = be32(at);
-            if (b.substr(at + 4, 4) == "IDAT" && length == 0) return "an empty PNG IDAT chunk";
-            if (b.substr(at + 4, 4) == "IEND") break;
-            at += 12 + length;
-        }
-        return "";
-    }
-    if (b.size() >= 3 && byte(0) == 0xFF && byte(1) == 0xD8 && byte(2) == 0xFF) {
-        // Walk the markers (and past entropy-coded data) to every Huffman table and scan.
-        std::size_t at = 2;
-        bool progressive = false;
-        unsigned defined[2] = {0, 0};  // bit k: DC (0) / AC (1) Huffman table k seen so far
-        while (at + 4 <= b.size()) {
-            if (byte(at) != 0xFF) {  // entropy-coded data: up to the next real marker
-                ++at;
-                continue;
-            }
-            const unsigned marker = byte(at + 1);
-            if (marker == 0xFF || marker == 0x00 || (marker >= 0xD0 && marker <= 0xD8) || marker == 0x01) {
-                at += marker == 0xFF ? 1 : 2;
-                continue;
-            }
-            if (marker == 0xD9) break;  // end of image
-            const std::size_t length = be16(at + 2);
-            if (length < 2 || at + 2 + length > b.size()) return "a JPEG segment runs past the end of the file";
-            if (marker == 0xC4) {
-                for (std::size_t t = at + 4; t < at + 2 + length;) {
-                    if (t + 17 > at + 2 + length) return "a truncated JPEG Huffman table";
-                    std::size_t codes = 0;
-                    for (std::size_t k = 1; k <= 16; ++k) codes += byte(t + k);
-                    if (codes > 256) return "a JPEG Huffman table with more than 256 codes";
-                    if ((byte(t) >> 4) <= 1 && (byte(t) & 15) <= 3) defined[byte(t) >> 4] |= 1u << (byte(t) & 15);
-                    t += 17 + codes;
-                    if (t > at + 2 + length) return "a truncated JPEG Huffman table";
-                }
-            }
-            if (marker >= 0xC0 && marker <= 0xC2) progressive = marker == 0xC2;
-            if (marker == 0xDA) {
-                // A scan decodes with tables it names; stb reads an undefined one from
-                // uninitialised memory. Baseline scans use both; a progressive scan the DC
-                // table (first DC pass) or the AC table (spectral bands above 0).
-                const std::size_t count = length >= 3 ? byte(at + 4) : 0;
-                if (length < 6 + 2 * count) return "a truncated JPEG scan header";
-                const std::size_t after = at + 5 + 2 * count;
-                const bool dc_scan = byte(after) == 0, first_pass = (byte(after + 2) >> 4) == 0;
-                for (std::size_t c = 0; c < count; ++c) {
-                    const unsigned dc = byte(at + 6 + 2 * c) >> 4, ac = byte(at + 6 + 2 * c) & 15;
-                    const bool need_dc = !progressive || (dc_scan && first_pass), need_ac = !progressive || !dc_scan;
-                    if ((need_dc && (dc > 3 || !(defined[0] >> dc & 1))) || (need_ac && (ac > 3 || !(defined[1] >> ac & 1))))
-                        return "a JPEG scan that uses an undefined Huffman table";
-                }
-            }
-            at += 2 + length;
-        }
-        return "";
-    }
-    if (b.size() >= 2 && b[0] == 'P' && (b[1] == '5' || b[1] == '6')) {
-        // Width, height and maximum value: plain numbers that fit an int.
-        std::size_t at = 2;
-        for (int field = 0; field < 3; ++field) {
-            while (at < b.size() && (std::isspace(byte(at)) || b[at] == '#')) {
-                if (b[at] == '#')
-                    while (at < b.size() && b[at] != '\n' && b[at] != '\r') ++at;
-                else
-                    ++at;
-            }
-            std::size_t digits = 0;
-            while (at < b.size() && std::isdigit(byte(at))) ++at, ++digits;
-            if (digits == 0 || digits > 9) return "a PNM header with a missing or oversized number";
-        }
-        return "";
-    }
+    if (b.substr(0, 8) == std::string_view("\x89PNG\r\n\x1a\n", 8)) return png_structure_problem(b);
+    if (b.size() >= 3 && image_byte(b, 0) == 0xFF && image_byte(b, 1) == 0xD8 && image_byte(b, 2) == 0xFF)
+        return jpeg_structure_problem(b);
+    if (b.size() >= 2 && b[0] == 'P' && (b[1] == '5' || b[1] == '6')) return pnm_structure_problem(b);
     if (b.substr(0, 2) == "BM") return "";
     if (b.substr(0, 2) == "#?") return "a Radiance HDR image (not taken: stb loops forever on some; use PFM)";
     return "not a PNG, JPEG, BMP, binary PGM/PPM or PFM image";

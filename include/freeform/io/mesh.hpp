@@ -222,30 +222,31 @@ inline TriangleMesh read_stl_ascii(std::string_view bytes, const std::filesystem
 
 }  // namespace detail
 
-// Parses a Wavefront OBJ: 'v', 'vn' and 'f' records (faces as "a", "a/b", "a/b/c" or
-// "a//c", negative indices relative to the end; polygons fan-triangulated); all other
-// records are ignored. Vertex normals are kept only when every vertex gets one
-// consistent (normalised) 'vn' from the faces; otherwise mesh.normals is empty.
-// Throws IoError naming the file (`file` names the text in messages) and the line on
-// malformed records or indices out of range, and when the file holds no face; InputError
-// when the records (counted before anything is built) ask for more than limits.triangles
-// triangles or 3 × limits.triangles vertex records.
-inline TriangleMesh parse_obj(std::string_view text, const std::filesystem::path& file, const Limits& limits = {}) {
-    {
-        std::uint64_t triangles = 0, vertex_records = 0;
-        detail::for_each_line(text, [&](int, std::string_view line) {
-            const auto tokens = detail::split_whitespace(line.substr(0, line.find('#')));
-            if (tokens.empty()) return;
-            if (tokens[0] == "f" && tokens.size() >= 4) triangles += tokens.size() - 3;
-            if (tokens[0] == "v" || tokens[0] == "vn") ++vertex_records;
-        });
-        detail::check_triangle_count(triangles, file, "OBJ", limits);
-        if (vertex_records > 3 * limits.triangles)
-            over_limit("OBJ file '" + file.string() + "': " + std::to_string(vertex_records) +
-                           " vertex records (v and vn), more than 3 x triangles,",
-                       "triangles", std::to_string(limits.triangles));
-    }
+namespace detail {
 
+// Counts the OBJ's faces (as triangles) and vertex records before anything is built, so
+// that a file asking for more than the limits is refused up front.
+inline void check_obj_size(std::string_view text, const std::filesystem::path& file, const Limits& limits) {
+    std::uint64_t triangles = 0, vertex_records = 0;
+    for_each_line(text, [&](int, std::string_view line) {
+        const auto tokens = split_whitespace(line.substr(0, line.find('#')));
+        if (tokens.empty()) return;
+        if (tokens[0] == "f" && tokens.size() >= 4) triangles += tokens.size() - 3;
+        if (tokens[0] == "v" || tokens[0] == "vn") ++vertex_records;
+    });
+    check_triangle_count(triangles, file, "OBJ", limits);
+    if (vertex_records > 3 * limits.triangles)
+        over_limit("OBJ file '" + file.string() + "': " + std::to_string(vertex_records) +
+                       " vertex records (v and vn), more than 3 x triangles,",
+                   "triangles", std::to_string(limits.triangles));
+}
+
+inline IoError obj_error(const std::filesystem::path& file, int line_number, const std::string& problem) {
+    return IoError("bad OBJ file '" + file.string() + "' line " + std::to_string(line_number) + ": " + problem);
+}
+
+// An OBJ file as read, before its indices are checked against what the file holds.
+struct ObjRecords {
     struct Corner {
         std::int64_t vertex;
         std::int64_t normal;  // -1: none given
@@ -254,78 +255,89 @@ inline TriangleMesh parse_obj(std::string_view text, const std::filesystem::path
     std::vector<Vec3d> positions;
     std::vector<Vec3d> normals;
     std::vector<std::array<Corner, 3>> faces;
+};
 
-    const auto error = [&](int line_number, const std::string& problem) {
-        return IoError("bad OBJ file '" + file.string() + "' line " + std::to_string(line_number) + ": " + problem);
-    };
+// Appends the triangles of one 'f' record (a polygon, fan-triangulated) to obj.faces.
+inline void read_obj_face(const std::vector<std::string_view>& tokens, int line_number,
+                          const std::filesystem::path& file, ObjRecords& obj) {
+    using Corner = ObjRecords::Corner;
+    if (tokens.size() < 4)
+        throw obj_error(file, line_number,
+                        "a face needs at least three vertices, found " + std::to_string(tokens.size() - 1));
+    std::vector<Corner> polygon;
+    for (std::size_t k = 1; k < tokens.size(); ++k) {
+        const std::string_view ref = tokens[k];
+        const std::size_t slash1 = ref.find('/');
+        const std::size_t slash2 = slash1 == std::string_view::npos ? slash1 : ref.find('/', slash1 + 1);
+        const auto resolve = [&](std::string_view index_text, std::size_t count, const char* what) {
+            long long index = 0;
+            if (!parse_int(index_text, index) || index == 0)
+                throw obj_error(file, line_number,
+                                std::string("bad ") + what + " index '" + std::string(index_text) + "' in '" +
+                                    std::string(ref) + "'");
+            // Negative indices count back from the elements read so far; positive
+            // ones are checked once the whole file is read.
+            return index > 0 ? std::int64_t(index - 1) : std::int64_t(count) + index;
+        };
+        Corner corner{resolve(ref.substr(0, slash1), obj.positions.size(), "vertex"), -1, line_number};
+        if (slash1 != std::string_view::npos) {
+            const std::string_view texture = ref.substr(slash1 + 1, slash2 - slash1 - 1);
+            long long ignored = 0;
+            if (!texture.empty() && !parse_int(texture, ignored))
+                throw obj_error(file, line_number, "bad texture index in '" + std::string(ref) + "'");
+            if (slash2 != std::string_view::npos)
+                corner.normal = resolve(ref.substr(slash2 + 1), obj.normals.size(), "normal");
+        }
+        polygon.push_back(corner);
+    }
+    for (std::size_t k = 1; k + 1 < polygon.size(); ++k) obj.faces.push_back({polygon[0], polygon[k], polygon[k + 1]});
+}
 
-    detail::for_each_line(text, [&](int line_number, std::string_view line) {
+// The 'v', 'vn' and 'f' records of an OBJ text; other records are skipped.
+inline ObjRecords read_obj_records(std::string_view text, const std::filesystem::path& file) {
+    ObjRecords obj;
+    for_each_line(text, [&](int line_number, std::string_view line) {
         if (const std::size_t hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
-        const auto tokens = detail::split_whitespace(line);
+        const auto tokens = split_whitespace(line);
         if (tokens.empty()) return;
         const std::string_view keyword = tokens[0];
 
         if (keyword == "v" || keyword == "vn") {
             // 'v' may carry a w or a colour after x y z; 'vn' has exactly three values.
             if (tokens.size() < 4 || (keyword == "vn" && tokens.size() != 4))
-                throw error(line_number, "'" + std::string(keyword) + "' needs three coordinates");
+                throw obj_error(file, line_number, "'" + std::string(keyword) + "' needs three coordinates");
             Vec3d p;
-            if (!detail::parse_double(tokens[1], p.x) || !detail::parse_double(tokens[2], p.y) ||
-                !detail::parse_double(tokens[3], p.z))
-                throw error(line_number, "'" + std::string(keyword) + "' coordinates must be finite numbers");
-            (keyword == "v" ? positions : normals).push_back(p);
+            if (!parse_double(tokens[1], p.x) || !parse_double(tokens[2], p.y) || !parse_double(tokens[3], p.z))
+                throw obj_error(file, line_number, "'" + std::string(keyword) + "' coordinates must be finite numbers");
+            (keyword == "v" ? obj.positions : obj.normals).push_back(p);
         } else if (keyword == "f") {
-            if (tokens.size() < 4)
-                throw error(line_number, "a face needs at least three vertices, found " +
-                                             std::to_string(tokens.size() - 1));
-            std::vector<Corner> polygon;
-            for (std::size_t k = 1; k < tokens.size(); ++k) {
-                const std::string_view ref = tokens[k];
-                const std::size_t slash1 = ref.find('/');
-                const std::size_t slash2 = slash1 == std::string_view::npos ? slash1 : ref.find('/', slash1 + 1);
-                const auto resolve = [&](std::string_view index_text, std::size_t count, const char* what) {
-                    long long index = 0;
-                    if (!detail::parse_int(index_text, index) || index == 0)
-                        throw error(line_number, std::string("bad ") + what + " index '" + std::string(index_text) +
-                                                     "' in '" + std::string(ref) + "'");
-                    // Negative indices count back from the elements read so far; positive
-                    // ones are checked once the whole file is read.
-                    return index > 0 ? std::int64_t(index - 1) : std::int64_t(count) + index;
-                };
-                Corner corner{resolve(ref.substr(0, slash1), positions.size(), "vertex"), -1, line_number};
-                if (slash1 != std::string_view::npos) {
-                    const std::string_view texture = ref.substr(slash1 + 1, slash2 - slash1 - 1);
-                    long long ignored = 0;
-                    if (!texture.empty() && !detail::parse_int(texture, ignored))
-                        throw error(line_number, "bad texture index in '" + std::string(ref) + "'");
-                    if (slash2 != std::string_view::npos)
-                        corner.normal = resolve(ref.substr(slash2 + 1), normals.size(), "normal");
-                }
-                polygon.push_back(corner);
-            }
-            for (std::size_t k = 1; k + 1 < polygon.size(); ++k) faces.push_back({polygon[0], polygon[k], polygon[k + 1]});
+            read_obj_face(tokens, line_number, file, obj);
         }
     });
+    return obj;
+}
 
-    if (faces.empty()) throw IoError("bad OBJ file '" + file.string() + "': no faces");
-    if (positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()))
-        throw IoError("bad OBJ file '" + file.string() + "': too many vertices");
-
+// The mesh of the records: indices checked against the vertices and normals the file
+// holds, and vertex normals kept only when each vertex has one consistent non-zero one.
+inline TriangleMesh assemble_obj(ObjRecords&& obj, const std::filesystem::path& file) {
+    using Corner = ObjRecords::Corner;
+    const std::vector<Vec3d>& normals = obj.normals;
     TriangleMesh mesh;
-    mesh.vertices = std::move(positions);
-    mesh.triangles.reserve(faces.size());
+    mesh.vertices = std::move(obj.positions);
+    mesh.triangles.reserve(obj.faces.size());
     constexpr std::int64_t unset = -2;
     std::vector<std::int64_t> normal_of(mesh.vertices.size(), unset);
     bool consistent_normals = true;
-    for (const auto& face : faces) {
+    for (const auto& face : obj.faces) {
         std::array<std::int32_t, 3> tri{};
         for (int k = 0; k < 3; ++k) {
             const Corner& c = face[k];
             if (c.vertex < 0 || c.vertex >= std::int64_t(mesh.vertices.size()))
-                throw error(c.line, "vertex index out of range (" + std::to_string(mesh.vertices.size()) +
-                                        " vertices)");
+                throw obj_error(file, c.line,
+                                "vertex index out of range (" + std::to_string(mesh.vertices.size()) + " vertices)");
             if (c.normal != -1 && (c.normal < 0 || c.normal >= std::int64_t(normals.size())))
-                throw error(c.line, "normal index out of range (" + std::to_string(normals.size()) + " normals)");
+                throw obj_error(file, c.line,
+                                "normal index out of range (" + std::to_string(normals.size()) + " normals)");
             tri[k] = static_cast<std::int32_t>(c.vertex);
 
             std::int64_t& chosen = normal_of[std::size_t(c.vertex)];
@@ -346,6 +358,25 @@ inline TriangleMesh parse_obj(std::string_view text, const std::filesystem::path
         for (std::size_t v = 0; v < mesh.vertices.size(); ++v) mesh.normals[v] = normalize(normals[std::size_t(normal_of[v])]);
     }
     return mesh;
+}
+
+}  // namespace detail
+
+// Parses a Wavefront OBJ: 'v', 'vn' and 'f' records (faces as "a", "a/b", "a/b/c" or
+// "a//c", negative indices relative to the end; polygons fan-triangulated); all other
+// records are ignored. Vertex normals are kept only when every vertex gets one
+// consistent (normalised) 'vn' from the faces; otherwise mesh.normals is empty.
+// Throws IoError naming the file (`file` names the text in messages) and the line on
+// malformed records or indices out of range, and when the file holds no face; InputError
+// when the records (counted before anything is built) ask for more than limits.triangles
+// triangles or 3 × limits.triangles vertex records.
+inline TriangleMesh parse_obj(std::string_view text, const std::filesystem::path& file, const Limits& limits = {}) {
+    detail::check_obj_size(text, file, limits);
+    detail::ObjRecords obj = detail::read_obj_records(text, file);
+    if (obj.faces.empty()) throw IoError("bad OBJ file '" + file.string() + "': no faces");
+    if (obj.positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()))
+        throw IoError("bad OBJ file '" + file.string() + "': too many vertices");
+    return detail::assemble_obj(std::move(obj), file);
 }
 
 // The mesh with vertices at bit-identical positions merged (normals dropped): an OBJ

@@ -463,6 +463,56 @@ inline std::vector<std::pair<double, double>> read_profile(const json& v, const 
     return rows;
 }
 
+// Sources behind the surface or inside its height slab cannot light it; say so
+// here, with the key, rather than when rays are generated.
+inline void check_in_front(Vec3d p, const std::string& key, const SurfaceSpec& surface) {
+    if (!(surface.frame.to_local(p).z > surface.h_max))
+        throw error(key,
+                    "must lie in front of the surface (on the side surface.normal points to) and above "
+                    "its highest allowed height, got " +
+                        vec_json(p).dump());
+}
+
+inline CollimatedLight read_collimated_light(const Object& o, const SurfaceSpec& surface) {
+    const Frame& sf = surface.frame;
+    CollimatedLight c;
+    if (const json* v = o.find("direction")) c.direction = nonzero_vec3(*v, o.at("direction"));
+    if (!(dot(normalize(c.direction), sf.w) < -1e-9))
+        throw error(o.at("direction"), "must point towards the surface's front (against surface.normal), got " +
+                                           vec_json(c.direction).dump());
+    if (const json* v = o.find("angular_radius"))
+        c.angular_radius = number_in(*v, o.at("angular_radius"), 0, max_angular_radius);
+    const double tilt = std::acos(std::clamp(-dot(normalize(c.direction), sf.w), -1.0, 1.0)) * 180.0 / pi;
+    if (c.angular_radius > 0 && tilt + c.angular_radius >= 89.0)
+        throw error(o.at("angular_radius"), "the source's edge, " + format_number(c.angular_radius) +
+                                                " degrees around light.direction, would graze the surface "
+                                                "(it is tilted " + format_number(tilt) + " degrees from its normal)");
+    return c;
+}
+
+inline PointLight read_point_light(const Object& o, const SurfaceSpec& surface) {
+    PointLight p;
+    p.position = vec3(o.require("position"), o.at("position"));
+    check_in_front(p.position, o.at("position"), surface);
+    if (const json* v = o.find("axis"))
+        p.axis = nonzero_vec3(*v, o.at("axis"));
+    else if (!(length(surface.frame.origin - p.position) > 0))
+        throw error(o.at("axis"),
+                    "cannot default to \"towards the surface centre\": light.position is "
+                    "the surface centre");
+    if (const json* v = o.find("profile")) p.profile = read_profile(*v, o.at("profile"));
+    return p;
+}
+
+inline DiskLight read_disk_light(const Object& o, const SurfaceSpec& surface) {
+    DiskLight d;
+    d.center = vec3(o.require("center"), o.at("center"));
+    check_in_front(d.center, o.at("center"), surface);
+    if (const json* v = o.find("normal")) d.normal = nonzero_vec3(*v, o.at("normal"));
+    d.radius = positive(o.require("radius"), o.at("radius"));
+    return d;
+}
+
 inline Light read_light(const json& j, const SurfaceSpec& surface) {
     const Object o(j, "light");
     const int type = enumeration(o.require("type"), o.at("type"), light_type_names);
@@ -491,56 +541,10 @@ inline Light read_light(const json& j, const SurfaceSpec& surface) {
     }
     if (const json* v = o.find("rays")) light.rays = integer(*v, o.at("rays"), 1, max_rays);
 
-    const Frame& sf = surface.frame;
-    // Sources behind the surface or inside its height slab cannot light it; say so
-    // here, with the key, rather than when rays are generated.
-    const auto check_in_front = [&](Vec3d p, const std::string& key) {
-        if (!(sf.to_local(p).z > surface.h_max))
-            throw error(key,
-                        "must lie in front of the surface (on the side surface.normal points to) and above "
-                        "its highest allowed height, got " +
-                            vec_json(p).dump());
-    };
     switch (type) {
-        case 0: {
-            CollimatedLight c;
-            if (const json* v = o.find("direction")) c.direction = nonzero_vec3(*v, o.at("direction"));
-            if (!(dot(normalize(c.direction), sf.w) < -1e-9))
-                throw error(o.at("direction"), "must point towards the surface's front (against surface.normal), got " +
-                                                   vec_json(c.direction).dump());
-            if (const json* v = o.find("angular_radius"))
-                c.angular_radius = number_in(*v, o.at("angular_radius"), 0, max_angular_radius);
-            const double tilt = std::acos(std::clamp(-dot(normalize(c.direction), sf.w), -1.0, 1.0)) * 180.0 / pi;
-            if (c.angular_radius > 0 && tilt + c.angular_radius >= 89.0)
-                throw error(o.at("angular_radius"), "the source's edge, " + format_number(c.angular_radius) +
-                                                        " degrees around light.direction, would graze the surface "
-                                                        "(it is tilted " + format_number(tilt) + " degrees from its normal)");
-            light.shape = c;
-            break;
-        }
-        case 1: {
-            PointLight p;
-            p.position = vec3(o.require("position"), o.at("position"));
-            check_in_front(p.position, o.at("position"));
-            if (const json* v = o.find("axis"))
-                p.axis = nonzero_vec3(*v, o.at("axis"));
-            else if (!(length(sf.origin - p.position) > 0))
-                throw error(o.at("axis"),
-                            "cannot default to \"towards the surface centre\": light.position is "
-                            "the surface centre");
-            if (const json* v = o.find("profile")) p.profile = read_profile(*v, o.at("profile"));
-            light.shape = p;
-            break;
-        }
-        default: {
-            DiskLight d;
-            d.center = vec3(o.require("center"), o.at("center"));
-            check_in_front(d.center, o.at("center"));
-            if (const json* v = o.find("normal")) d.normal = nonzero_vec3(*v, o.at("normal"));
-            d.radius = positive(o.require("radius"), o.at("radius"));
-            light.shape = d;
-            break;
-        }
+        case 0: light.shape = read_collimated_light(o, surface); break;
+        case 1: light.shape = read_point_light(o, surface); break;
+        default: light.shape = read_disk_light(o, surface); break;
     }
     return light;
 }
@@ -892,14 +896,9 @@ inline Scene scene_from_json(const nlohmann::json& j, const std::filesystem::pat
     return s;
 }
 
-// The effective scene with every default written out (file names as given to the
-// Scene, i.e. resolved when it was loaded). Reading it back gives the same JSON.
-inline nlohmann::json scene_to_json(const Scene& s) {
-    using namespace scene_json;
-    json out = json::object();
-    if (!s.name.empty()) out["name"] = s.name;
-    if (!s.description.empty()) out["description"] = s.description;
+namespace scene_json {
 
+inline json light_to_json(const Scene& s) {
     json light = json::object();
     light["type"] = light_type_name(s.light.shape);
     light["rays_per_cell"] = s.light.rays_per_cell;
@@ -924,8 +923,10 @@ inline nlohmann::json scene_to_json(const Scene& s) {
         light["normal"] = vec_json(d.normal);
         light["radius"] = d.radius;
     }
-    out["light"] = light;
+    return light;
+}
 
+inline json surface_to_json(const Scene& s) {
     const SurfaceSpec& sf = s.surface;
     json surface = json::object();
     surface["center"] = vec_json(sf.frame.origin);
@@ -949,7 +950,20 @@ inline nlohmann::json scene_to_json(const Scene& s) {
         surface["initial"] = json{{"paraboloid", {{"focal_length", sf.initial_paraboloid->focal_length}}}};
     else
         surface["initial"] = starts_from_transport(s) ? "transport" : "flat";
-    out["surface"] = surface;
+    return surface;
+}
+
+}  // namespace scene_json
+
+// The effective scene with every default written out (file names as given to the
+// Scene, i.e. resolved when it was loaded). Reading it back gives the same JSON.
+inline nlohmann::json scene_to_json(const Scene& s) {
+    using namespace scene_json;
+    json out = json::object();
+    if (!s.name.empty()) out["name"] = s.name;
+    if (!s.description.empty()) out["description"] = s.description;
+    out["light"] = light_to_json(s);
+    out["surface"] = surface_to_json(s);
 
     const Receiver& r = s.receiver;
     out["receiver"] = json{{"center", vec_json(r.frame.origin)},

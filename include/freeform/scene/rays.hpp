@@ -141,6 +141,80 @@ inline void finish(RaySet& rays, const std::vector<double>& w) {
     }
 }
 
+// Rays of a collimated light c (through `pts`, from the plane w = top), their weights
+// appended to w. `f` is the surface frame.
+inline void collimated_rays(const CollimatedLight& c, const Frame& f, const std::vector<AperturePoint>& pts, double top,
+                            std::uint64_t seed, RaySet& rays, std::vector<double>& w) {
+    const double dl = length(c.direction);
+    if (!(dl > 0) || !std::isfinite(dl)) throw InputError("light.direction must be a finite non-zero vector");
+    const Vec3d d = f.dir_to_local(c.direction / dl);
+    if (!(d.z < -1e-9))
+        throw InputError("light.direction must point towards the surface's front (against surface.normal)");
+    const ConeSampler cone(d, c.angular_radius, seed);
+    for (std::size_t q = 0; q < pts.size(); ++q)
+        for (int m = 0; m < cone.per_point(); ++m) {
+            const Vec3d dk = cone.direction(q, m);
+            if (!(dk.z < -1e-9)) continue;  // a wide source's edge grazing or behind the aperture plane
+            const double t = top / -dk.z;   // from the plane w = top down to w = 0
+            const Vec3d o{pts[q].u - t * dk.x, pts[q].v - t * dk.y, top};
+            rays.origin.push_back(static_cast<Vec3>(o));
+            rays.direction.push_back(static_cast<Vec3>(dk));
+            // Power through the aperture plane per unit area: the cosine to its normal,
+            // relative to the central direction's (exactly 1 for parallel light).
+            w.push_back(cone.parallel() ? 1.0 : dk.z / d.z);
+        }
+}
+
+// Rays of a point light pl to the aperture points `pts` (each standing for an area dA).
+inline void point_light_rays(const PointLight& pl, const Frame& f, const std::vector<AperturePoint>& pts, double top,
+                             double dA, RaySet& rays, std::vector<double>& w) {
+    const Vec3d pos = f.to_local(pl.position);
+    if (!(pos.z > top)) throw InputError("light.position must lie in front of the surface, above its height bounds");
+    Vec3d axis = length(pl.axis) > 0 ? f.dir_to_local(normalize(pl.axis)) : normalize(Vec3d{0, 0, 0} - pos);
+    for (const auto& p : pts) {
+        const Vec3d to = Vec3d{p.u, p.v, 0} - pos;
+        const double r2 = dot(to, to);
+        const Vec3d d = to / std::sqrt(r2);
+        const double deg = std::acos(std::clamp(dot(d, axis), -1.0, 1.0)) * 180.0 / pi;
+        const double weight = profile_intensity(pl.profile, deg) * (-d.z) * dA / r2;
+        if (!(weight > 0)) continue;
+        rays.origin.push_back(static_cast<Vec3>(pos));
+        rays.direction.push_back(static_cast<Vec3>(d));
+        w.push_back(weight);
+    }
+}
+
+// Rays of a disk light, one from a point of the disk to each aperture point.
+inline void disk_light_rays(const DiskLight& disk, const Frame& f, const std::vector<AperturePoint>& pts, double top,
+                            double dA, std::uint64_t seed, RaySet& rays, std::vector<double>& w) {
+    const Vec3d c = f.to_local(disk.center);
+    const Frame df =
+        make_frame(disk.center, disk.normal, std::abs(disk.normal.z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, "light");
+    const Vec3d du = f.dir_to_local(df.u), dv = f.dir_to_local(df.v), dn = f.dir_to_local(df.w);
+    if (!(c.z > top)) throw InputError("light.center must lie in front of the surface, above its height bounds");
+    const double disk_area = pi * disk.radius * disk.radius;
+    // Stratify the disk too, pairing disk strata with aperture strata by a fixed
+    // scramble so that every aperture stratum sees a different part of the source.
+    const std::int64_t n = std::int64_t(pts.size());
+    const int g = std::max(1, int(std::lround(std::sqrt(double(n)))));
+    for (std::int64_t k = 0; k < n; ++k) {
+        const auto& p = pts[std::size_t(k)];
+        const auto [a, b] = scrambled_stratum(std::size_t(k), g, seed, seed ^ 0x5bd1e995ULL);
+        // Concentric-free polar mapping is enough here: uniform in area.
+        const double r = disk.radius * std::sqrt(a), phi = 2 * pi * b;
+        const Vec3d o = c + (r * std::cos(phi)) * du + (r * std::sin(phi)) * dv;
+        const Vec3d to = Vec3d{p.u, p.v, 0} - o;
+        const double r2 = dot(to, to);
+        const Vec3d d = to / std::sqrt(r2);
+        const double cos_src = dot(d, dn);
+        const double weight = std::max(0.0, cos_src) * (-d.z) * dA * disk_area / r2;
+        if (!(weight > 0)) continue;
+        rays.origin.push_back(static_cast<Vec3>(o));
+        rays.direction.push_back(static_cast<Vec3>(d));
+        w.push_back(weight);
+    }
+}
+
 }  // namespace detail
 
 // Generates the rays of `light` aimed at the aperture of `surface`, deterministic for `seed`.
@@ -161,69 +235,12 @@ inline RaySet generate_rays(const Light& light, const Heightmap& surface, const 
     // Rays start just above the slab so that the whole path through it is traced.
     const double top = double(surface.h_max()) + 1e-6 * std::max(surface.size().x, surface.size().y);
 
-    if (const auto* c = collimated) {
-        const double dl = length(c->direction);
-        if (!(dl > 0) || !std::isfinite(dl)) throw InputError("light.direction must be a finite non-zero vector");
-        const Vec3d d = f.dir_to_local(c->direction / dl);
-        if (!(d.z < -1e-9))
-            throw InputError("light.direction must point towards the surface's front (against surface.normal)");
-        const detail::ConeSampler cone(d, c->angular_radius, seed);
-        for (std::size_t q = 0; q < pts.size(); ++q)
-            for (int m = 0; m < cone.per_point(); ++m) {
-                const Vec3d dk = cone.direction(q, m);
-                if (!(dk.z < -1e-9)) continue;  // a wide source's edge grazing or behind the aperture plane
-                const double t = top / -dk.z;  // from the plane w = top down to w = 0
-                const Vec3d o{pts[q].u - t * dk.x, pts[q].v - t * dk.y, top};
-                rays.origin.push_back(static_cast<Vec3>(o));
-                rays.direction.push_back(static_cast<Vec3>(dk));
-                // Power through the aperture plane per unit area: the cosine to its normal,
-                // relative to the central direction's (exactly 1 for parallel light).
-                w.push_back(cone.parallel() ? 1.0 : dk.z / d.z);
-            }
-    } else if (const auto* pl = std::get_if<PointLight>(&light.shape)) {
-        const Vec3d pos = f.to_local(pl->position);
-        if (!(pos.z > top)) throw InputError("light.position must lie in front of the surface, above its height bounds");
-        Vec3d axis = length(pl->axis) > 0 ? f.dir_to_local(normalize(pl->axis)) : normalize(Vec3d{0, 0, 0} - pos);
-        for (const auto& p : pts) {
-            const Vec3d to = Vec3d{p.u, p.v, 0} - pos;
-            const double r2 = dot(to, to);
-            const Vec3d d = to / std::sqrt(r2);
-            const double deg = std::acos(std::clamp(dot(d, axis), -1.0, 1.0)) * 180.0 / pi;
-            const double weight = profile_intensity(pl->profile, deg) * (-d.z) * dA / r2;
-            if (!(weight > 0)) continue;
-            rays.origin.push_back(static_cast<Vec3>(pos));
-            rays.direction.push_back(static_cast<Vec3>(d));
-            w.push_back(weight);
-        }
-    } else {
-        const auto& disk = std::get<DiskLight>(light.shape);
-        const Vec3d c = f.to_local(disk.center);
-        const Frame df = make_frame(disk.center, disk.normal,
-                                    std::abs(disk.normal.z) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, 1, 0}, "light");
-        const Vec3d du = f.dir_to_local(df.u), dv = f.dir_to_local(df.v), dn = f.dir_to_local(df.w);
-        if (!(c.z > top)) throw InputError("light.center must lie in front of the surface, above its height bounds");
-        const double disk_area = pi * disk.radius * disk.radius;
-        // Stratify the disk too, pairing disk strata with aperture strata by a fixed
-        // scramble so that every aperture stratum sees a different part of the source.
-        const std::int64_t n = std::int64_t(pts.size());
-        const int g = std::max(1, int(std::lround(std::sqrt(double(n)))));
-        for (std::int64_t k = 0; k < n; ++k) {
-            const auto& p = pts[std::size_t(k)];
-            const auto [a, b] = detail::scrambled_stratum(std::size_t(k), g, seed, seed ^ 0x5bd1e995ULL);
-            // Concentric-free polar mapping is enough here: uniform in area.
-            const double r = disk.radius * std::sqrt(a), phi = 2 * pi * b;
-            const Vec3d o = c + (r * std::cos(phi)) * du + (r * std::sin(phi)) * dv;
-            const Vec3d to = Vec3d{p.u, p.v, 0} - o;
-            const double r2 = dot(to, to);
-            const Vec3d d = to / std::sqrt(r2);
-            const double cos_src = dot(d, dn);
-            const double weight = std::max(0.0, cos_src) * (-d.z) * dA * disk_area / r2;
-            if (!(weight > 0)) continue;
-            rays.origin.push_back(static_cast<Vec3>(o));
-            rays.direction.push_back(static_cast<Vec3>(d));
-            w.push_back(weight);
-        }
-    }
+    if (collimated)
+        detail::collimated_rays(*collimated, f, pts, top, seed, rays, w);
+    else if (const auto* pl = std::get_if<PointLight>(&light.shape))
+        detail::point_light_rays(*pl, f, pts, top, dA, rays, w);
+    else
+        detail::disk_light_rays(std::get<DiskLight>(light.shape), f, pts, top, dA, seed, rays, w);
     detail::finish(rays, w);
     return rays;
 }

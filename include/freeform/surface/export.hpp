@@ -228,6 +228,92 @@ inline void to_world(const Frame& f, TriangleMesh& mesh) {
     for (Vec3d& n : mesh.normals) n = f.dir_to_world(n);
 }
 
+// Throws InputError unless the back face at w = -t (t the lens thickness) lies below the
+// first `front_count` vertices of the mesh (the front).
+inline void check_lens_clearance(double t, const TriangleMesh& mesh, std::size_t front_count) {
+    for (std::size_t v = 0; v < front_count; ++v)
+        if (!(mesh.vertices[v].z > -t))
+            throw InputError(
+                "lens thickness " + std::to_string(t) + " does not clear the front surface, which reaches w = " +
+                std::to_string(mesh.vertices[v].z) + ": the back face must lie below every point of the front");
+}
+
+// Adds the side walls and the back face of lens_solid_of to its front, one cell at a
+// time. `fine_index` maps the front's fine grid (fx points a row, k sub-cells a cell
+// side) to its vertices, as tessellate_local left it.
+class LensClosure {
+public:
+    LensClosure(TriangleMesh& mesh, const std::vector<std::int32_t>& fine_index, int fx, int k, double t,
+                bool front_normals)
+        : mesh_(mesh), fine_index_(fine_index), fx_(fx), k_(k), t_(t), front_normals_(front_normals),
+          back_of_(mesh.vertices.size(), -1) {}
+
+    // Closes cell (ci, cj); open_side[s] tells whether side s (bottom, right, top,
+    // left) is on the outline, the cell across it missing.
+    void close_cell(int ci, int cj, const bool (&open_side)[4]) {
+        const int k = k_;
+        const int I0 = ci * k, J0 = cj * k;
+        // Corner start points and unit steps of the four sides: bottom, right, top, left.
+        const int start[4][2] = {{I0, J0}, {I0 + k, J0}, {I0 + k, J0 + k}, {I0, J0 + k}};
+        const int step[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+        ring_.clear();
+        bool any_open = false;
+        for (int s = 0; s < 4; ++s) {
+            if (!open_side[s]) {
+                ring_.push_back(fine(start[s][0], start[s][1]));
+                continue;
+            }
+            any_open = true;
+            for (int m = 0; m < k; ++m) {
+                const std::int32_t a = fine(start[s][0] + m * step[s][0], start[s][1] + m * step[s][1]);
+                const std::int32_t b = fine(start[s][0] + (m + 1) * step[s][0], start[s][1] + (m + 1) * step[s][1]);
+                ring_.push_back(a);
+                // Front edge a→b; the wall uses b→a on top and a'→b' at the bottom.
+                const std::int32_t ab = back(a), bb = back(b);
+                mesh_.triangles.push_back({b, a, ab});
+                mesh_.triangles.push_back({b, ab, bb});
+            }
+        }
+        for (std::int32_t& v : ring_) v = back(v);
+        // The back face looks along -w: its triangles run clockwise seen from +w.
+        if (!any_open) {
+            mesh_.triangles.push_back({ring_[0], ring_[2], ring_[1]});
+            mesh_.triangles.push_back({ring_[0], ring_[3], ring_[2]});
+            return;
+        }
+        Vec3d centre{0, 0, 0};
+        for (int s = 0; s < 4; ++s) centre = centre + mesh_.vertices[std::size_t(back(fine(start[s][0], start[s][1])))];
+        const auto c = std::int32_t(mesh_.vertices.size());
+        mesh_.vertices.push_back(0.25 * centre);
+        if (front_normals_) mesh_.normals.push_back({0, 0, -1});
+        for (std::size_t m = 0; m < ring_.size(); ++m)
+            mesh_.triangles.push_back({c, ring_[(m + 1) % ring_.size()], ring_[m]});
+    }
+
+private:
+    std::int32_t fine(int I, int J) const { return fine_index_[std::size_t(J) * fx_ + I]; }
+
+    // Back vertices are created on demand, one per front vertex that needs one.
+    std::int32_t back(std::int32_t front) {
+        std::int32_t& b = back_of_[std::size_t(front)];
+        if (b < 0) {
+            const Vec3d p = mesh_.vertices[std::size_t(front)];
+            b = std::int32_t(mesh_.vertices.size());
+            mesh_.vertices.push_back({p.x, p.y, -t_});
+            if (front_normals_) mesh_.normals.push_back({0, 0, -1});
+        }
+        return b;
+    }
+
+    TriangleMesh& mesh_;
+    const std::vector<std::int32_t>& fine_index_;
+    int fx_, k_;
+    double t_;
+    bool front_normals_;
+    std::vector<std::int32_t> back_of_;  // per front vertex; -1 until it has one
+    std::vector<std::int32_t> ring_;     // one cell's outline, counter-clockwise seen from +w
+};
+
 }  // namespace detail
 
 // The Phong-tessellated fabrication surface (an open sheet): ((nx-1)k+1) × ((ny-1)k+1)
@@ -282,31 +368,12 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, int subdivisio
     std::vector<std::int32_t> fine_index;
     TriangleMesh mesh = detail::tessellate_local(hm, k, fine_index, point);
     if (!front_normals) mesh.normals.clear();
-    const std::size_t front_count = mesh.vertices.size();
-    for (std::size_t v = 0; v < front_count; ++v)
-        if (!(mesh.vertices[v].z > -t))
-            throw InputError(
-                "lens thickness " + std::to_string(t) + " does not clear the front surface, which reaches w = " +
-                std::to_string(mesh.vertices[v].z) + ": the back face must lie below every point of the front");
+    detail::check_lens_clearance(t, mesh, mesh.vertices.size());
 
-    // Back vertices are created on demand, one per front vertex that needs one.
-    std::vector<std::int32_t> back_of(front_count, -1);
-    const auto back = [&](std::int32_t front) {
-        std::int32_t& b = back_of[std::size_t(front)];
-        if (b < 0) {
-            const Vec3d p = mesh.vertices[std::size_t(front)];
-            b = std::int32_t(mesh.vertices.size());
-            mesh.vertices.push_back({p.x, p.y, -t});
-            if (front_normals) mesh.normals.push_back({0, 0, -1});
-        }
-        return b;
-    };
-    const auto fine = [&](int I, int J) { return fine_index[std::size_t(J) * fx + I]; };
     const auto active = [&](int ci, int cj) {
         return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
     };
-
-    std::vector<std::int32_t> ring;  // one cell's outline, counter-clockwise seen from +w
+    detail::LensClosure closure(mesh, fine_index, fx, k, t, front_normals);
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
             if (!active(ci, cj)) continue;
@@ -316,43 +383,7 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, int subdivisio
             // boundary edges follow the ring's direction.
             const bool open_side[4] = {!active(ci, cj - 1), !active(ci + 1, cj), !active(ci, cj + 1),
                                        !active(ci - 1, cj)};
-            const int I0 = ci * k, J0 = cj * k;
-            // Corner start points and unit steps of the four sides: bottom, right, top, left.
-            const int start[4][2] = {{I0, J0}, {I0 + k, J0}, {I0 + k, J0 + k}, {I0, J0 + k}};
-            const int step[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
-            ring.clear();
-            bool any_open = false;
-            for (int s = 0; s < 4; ++s) {
-                if (!open_side[s]) {
-                    ring.push_back(fine(start[s][0], start[s][1]));
-                    continue;
-                }
-                any_open = true;
-                for (int m = 0; m < k; ++m) {
-                    const std::int32_t a = fine(start[s][0] + m * step[s][0], start[s][1] + m * step[s][1]);
-                    const std::int32_t b = fine(start[s][0] + (m + 1) * step[s][0], start[s][1] + (m + 1) * step[s][1]);
-                    ring.push_back(a);
-                    // Front edge a→b; the wall uses b→a on top and a'→b' at the bottom.
-                    const std::int32_t ab = back(a), bb = back(b);
-                    mesh.triangles.push_back({b, a, ab});
-                    mesh.triangles.push_back({b, ab, bb});
-                }
-            }
-            for (std::int32_t& v : ring) v = back(v);
-            // The back face looks along -w: its triangles run clockwise seen from +w.
-            if (!any_open) {
-                mesh.triangles.push_back({ring[0], ring[2], ring[1]});
-                mesh.triangles.push_back({ring[0], ring[3], ring[2]});
-                continue;
-            }
-            Vec3d centre{0, 0, 0};
-            for (int s = 0; s < 4; ++s)
-                centre = centre + mesh.vertices[std::size_t(back(fine(start[s][0], start[s][1])))];
-            const auto c = std::int32_t(mesh.vertices.size());
-            mesh.vertices.push_back(0.25 * centre);
-            if (front_normals) mesh.normals.push_back({0, 0, -1});
-            for (std::size_t m = 0; m < ring.size(); ++m)
-                mesh.triangles.push_back({c, ring[(m + 1) % ring.size()], ring[m]});
+            closure.close_cell(ci, cj, open_side);
         }
     if (world_frame) detail::to_world(hm.frame(), mesh);
     return mesh;

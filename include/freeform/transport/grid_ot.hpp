@@ -409,6 +409,52 @@ inline double block_residual(const Eigen::ArrayXXd& a, const Eigen::ArrayXXd& b,
     return 0.5 * sum;
 }
 
+// Throws InputError unless the grid has at least 2 × 2 cells of positive size and the
+// source and target are finite, non-negative masses of its size.
+inline void check_ot_input(const OtGrid& grid, const Eigen::ArrayXXd& source, const Eigen::ArrayXXd& target) {
+    if (grid.nx < 2 || grid.ny < 2 || !(grid.hx > 0) || !(grid.hy > 0))
+        throw InputError("transport: the grid must be at least 2 x 2 cells with a positive cell size");
+    if (source.rows() != grid.ny || source.cols() != grid.nx || target.rows() != grid.ny || target.cols() != grid.nx)
+        throw InputError("transport: source and target must match the grid's size");
+    if (!source.isFinite().all() || (source < 0).any())
+        throw InputError("transport: the source has negative or non-finite mass");
+    if (!target.isFinite().all() || (target < 0).any())
+        throw InputError("transport: the target has negative or non-finite mass");
+}
+
+// One ascent step on the potential `a` of side A (mass mA), whose c-transform `b`
+// lives on side B (mass mB): J(a) = <a, mA> + <a^c, mB>, whose gradient is
+// mA − T#mB, T the map of a (push_exact). The step is that gradient in the H¹ metric
+// (one Poisson solve, `cell` the cell area); `sigma` adapts to how much of the
+// predicted gain a step achieves, and a step that loses is halved. Returns the residual
+// ½Σ|mA − T#mB| before the step.
+inline double half_step(Workspace& ws, Eigen::ArrayXXd& a, Eigen::ArrayXXd& b, const Eigen::ArrayXXd& mA,
+                        const Eigen::ArrayXXd& mB, double& sigma, double cell, const OtOptions& options) {
+    double value = 0;
+    const Eigen::ArrayXXd rho = ws.push_exact(a, mA, mB, options.samples, value);
+    const double residual = block_residual(mA, rho, options.residual_block);
+    const Eigen::ArrayXXd grad = ws.inverse_laplacian((mA - rho) / cell);
+    const double slope = (grad * (mA - rho)).sum();  // H¹ norm² of the gradient
+    const double j0 = (a * mA).sum() + value;
+    for (int attempt = 0; attempt < 8; ++attempt) {
+        Eigen::ArrayXXd a_new = a + sigma * grad;
+        double value_new = 0;
+        ws.push_exact(a_new, mA, mB, options.samples, value_new);
+        const double gain = (a_new * mA).sum() + value_new - j0;
+        if (gain < 0) {  // overshoot: a smaller step
+            sigma *= 0.5;
+            continue;
+        }
+        const double ratio = slope > 0 ? gain / (sigma * slope) : 1.0;
+        a = std::move(a_new);
+        if (ratio > 0.75) sigma *= 1.5;
+        else if (ratio < 0.25) sigma *= 0.75;
+        break;
+    }
+    b = ws.c_transform(a, mA);
+    return residual;
+}
+
 }  // namespace ot_detail
 
 // Solves the quadratic-cost transport from `source` to `target` (masses per cell on
@@ -417,12 +463,7 @@ inline OtResult solve_grid_ot(const OtGrid& grid, const Eigen::ArrayXXd& source,
                               const OtOptions& options = {}) {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
-    if (grid.nx < 2 || grid.ny < 2 || !(grid.hx > 0) || !(grid.hy > 0))
-        throw InputError("transport: the grid must be at least 2 x 2 cells with a positive cell size");
-    if (source.rows() != grid.ny || source.cols() != grid.nx || target.rows() != grid.ny || target.cols() != grid.nx)
-        throw InputError("transport: source and target must match the grid's size");
-    if (!source.isFinite().all() || (source < 0).any()) throw InputError("transport: the source has negative or non-finite mass");
-    if (!target.isFinite().all() || (target < 0).any()) throw InputError("transport: the target has negative or non-finite mass");
+    ot_detail::check_ot_input(grid, source, target);
     const double ms = source.sum(), mt = target.sum();
     if (!(ms > 0)) throw InputError("transport: the source carries no light");
     if (!(mt > 0)) throw InputError("transport: the target is entirely black");
@@ -437,39 +478,6 @@ inline OtResult solve_grid_ot(const OtGrid& grid, const Eigen::ArrayXXd& source,
     r.grid = grid;
     Eigen::ArrayXXd phi = Eigen::ArrayXXd::Zero(grid.ny, grid.nx);  // target side
     Eigen::ArrayXXd psi = ws.c_transform(phi, nu);                   // source side
-    Eigen::ArrayXXd tx, ty;
-    // One ascent step on the potential `a` of side A (mass mA), whose c-transform `b`
-    // lives on side B (mass mB): J(a) = <a, mA> + <a^c, mB>, whose gradient is
-    // mA − T#mB, T the map of a (push_exact). The step is that gradient in the H¹ metric
-    // (one Poisson solve); `sigma` adapts to how much of the predicted gain a step
-    // achieves, and a step that loses is halved. Returns the residual ½Σ|mA − T#mB|
-    // before the step.
-    const auto half_step = [&](Eigen::ArrayXXd& a, Eigen::ArrayXXd& b, const Eigen::ArrayXXd& mA,
-                               const Eigen::ArrayXXd& mB, double& sigma) {
-        double value = 0;
-        const Eigen::ArrayXXd rho = ws.push_exact(a, mA, mB, options.samples, value);
-        const double residual = ot_detail::block_residual(mA, rho, options.residual_block);
-        const Eigen::ArrayXXd grad = ws.inverse_laplacian((mA - rho) / cell);
-        const double slope = (grad * (mA - rho)).sum();  // H¹ norm² of the gradient
-        const double j0 = (a * mA).sum() + value;
-        for (int attempt = 0; attempt < 8; ++attempt) {
-            Eigen::ArrayXXd a_new = a + sigma * grad;
-            double value_new = 0;
-            ws.push_exact(a_new, mA, mB, options.samples, value_new);
-            const double gain = (a_new * mA).sum() + value_new - j0;
-            if (gain < 0) {  // overshoot: a smaller step
-                sigma *= 0.5;
-                continue;
-            }
-            const double ratio = slope > 0 ? gain / (sigma * slope) : 1.0;
-            a = std::move(a_new);
-            if (ratio > 0.75) sigma *= 1.5;
-            else if (ratio < 0.25) sigma *= 0.75;
-            break;
-        }
-        b = ws.c_transform(a, mA);
-        return residual;
-    };
     double sigma_phi = 1.0 / max_density, sigma_psi = 1.0 / max_density;
     double best = 2;
     int best_at = 0;
@@ -478,7 +486,7 @@ inline OtResult solve_grid_ot(const OtGrid& grid, const Eigen::ArrayXXd& source,
         // φ step: the source pushed by x − ∇ψ must match ν; `res` is the residual of
         // the ψ it started from.
         const Eigen::ArrayXXd psi_before = psi;
-        const double res = half_step(phi, psi, nu, mu, sigma_phi);
+        const double res = ot_detail::half_step(ws, phi, psi, nu, mu, sigma_phi, cell, options);
         r.residual_history.push_back(res);
         if (res < 0.99 * best) best_at = it;
         if (res < best) best = res, best_psi = psi_before;
@@ -487,7 +495,7 @@ inline OtResult solve_grid_ot(const OtGrid& grid, const Eigen::ArrayXXd& source,
         if (options.time_limit > 0 && std::chrono::duration<double>(clock::now() - t0).count() > options.time_limit)
             break;
         // ψ step: the target pushed back by y − ∇φ must match μ.
-        half_step(psi, phi, mu, nu, sigma_psi);
+        ot_detail::half_step(ws, psi, phi, mu, nu, sigma_psi, cell, options);
     }
     // The returned map is the best one measured; recompute it from its potential.
     r.psi = best_psi;
