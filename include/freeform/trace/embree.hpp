@@ -504,7 +504,6 @@ private:
 
     void build_tiles() {
         const Heightmap& s = *surface_;
-        const HeightfieldView hf = s.view();
         const int cells_x = s.nx() - 1, cells_y = s.ny() - 1, t = tile_cells_;
         tiles_x_ = (cells_x + t - 1) / t;
         tiles_y_ = (cells_y + t - 1) / t;
@@ -518,70 +517,81 @@ private:
                 tile.cj0 = b * t;
                 tile.ci1 = std::min((a + 1) * t, cells_x);
                 tile.cj1 = std::min((b + 1) * t, cells_y);
-                const int row = tile.ci1 - tile.ci0 + 1;
-                std::vector<unsigned> index;
-                for (int cj = tile.cj0; cj < tile.cj1; ++cj) {
-                    for (int ci = tile.ci0; ci < tile.ci1; ++ci) {
-                        if (!hf.cell_active(ci, cj)) continue;
-                        const std::int32_t base = 2 * (cj * cells_x + ci);
-                        for (std::int32_t k = 0; k < 2; ++k) {
-                            int vi[3], vj[3];
-                            triangle_vertices(s.nx(), base + k, vi, vj);
-                            for (int m = 0; m < 3; ++m)
-                                index.push_back(unsigned((vj[m] - tile.cj0) * row + (vi[m] - tile.ci0)));
-                            tile.prim_to_tri.push_back(base + k);
-                        }
-                    }
-                }
-                if (index.empty()) continue;
-                tile.geometry.reset(rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_TRIANGLE));
-                device_.check("rtcNewGeometry (height-field tile)");
-                RTCGeometry g = tile.geometry.get();
-                const std::size_t nv = std::size_t(row) * std::size_t(tile.cj1 - tile.cj0 + 1);
-                tile.vertices = static_cast<float*>(
-                    rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), nv));
-                auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-                    g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), index.size() / 3));
-                device_.check("rtcSetNewGeometryBuffer (height-field tile)");
-                for (int j = tile.cj0; j <= tile.cj1; ++j) {
-                    for (int i = tile.ci0; i <= tile.ci1; ++i) {
-                        // The kernel's own vertex positions, bit for bit.
-                        const Vec3 v = hf.vertex(i, j);
-                        float* dst = tile.vertices + 3 * (std::size_t(j - tile.cj0) * row + std::size_t(i - tile.ci0));
-                        dst[0] = v.x, dst[1] = v.y, dst[2] = v.z;
-                    }
-                }
-                std::copy(index.begin(), index.end(), idx);
-                rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
-                with_geometry.push_back(std::size_t(b) * tiles_x_ + a);
+                if (make_tile_geometry(tile)) with_geometry.push_back(std::size_t(b) * tiles_x_ + a);
             }
         }
-        for (std::size_t k : with_geometry) {
-            Tile& tile = tiles_[k];
-            embree_detail::GeometryInfo info;
-            info.kind = HitKind::surface;
-            info.one_sided = true;
-            info.prim_to_tri = tile.prim_to_tri.data();
-            if (layout_ == EmbreeTileLayout::flat) {
-                attach(tile.geometry.get(), info, "height-field tile");
-                continue;
+        for (std::size_t k : with_geometry) attach_tile(tiles_[k]);
+    }
+
+    // The triangles of a tile's active cells as an Embree geometry (refitted when heights
+    // change); false, and no geometry, when none of its cells is active.
+    bool make_tile_geometry(Tile& tile) {
+        const Heightmap& s = *surface_;
+        const HeightfieldView hf = s.view();
+        const int cells_x = s.nx() - 1;
+        const int row = tile.ci1 - tile.ci0 + 1;
+        std::vector<unsigned> index;
+        for (int cj = tile.cj0; cj < tile.cj1; ++cj) {
+            for (int ci = tile.ci0; ci < tile.ci1; ++ci) {
+                if (!hf.cell_active(ci, cj)) continue;
+                const std::int32_t base = 2 * (cj * cells_x + ci);
+                for (std::int32_t k = 0; k < 2; ++k) {
+                    int vi[3], vj[3];
+                    triangle_vertices(s.nx(), base + k, vi, vj);
+                    for (int m = 0; m < 3; ++m) index.push_back(unsigned((vj[m] - tile.cj0) * row + (vi[m] - tile.ci0)));
+                    tile.prim_to_tri.push_back(base + k);
+                }
             }
-            tile.scene = new_scene();
-            rtcSetGeometryIntersectFilterFunction(tile.geometry.get(), &embree_detail::intersect_filter);
-            rtcCommitGeometry(tile.geometry.get());
-            rtcAttachGeometryByID(tile.scene.get(), tile.geometry.get(), 0);
-            rtcCommitScene(tile.scene.get());
-            device_.check("rtcCommitScene (height-field tile)");
-            tile.instance.reset(rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_INSTANCE));
-            device_.check("rtcNewGeometry (tile instance)");
-            rtcSetGeometryInstancedScene(tile.instance.get(), tile.scene.get());
-            constexpr float identity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};  // 3x4, column major
-            rtcSetGeometryTransform(tile.instance.get(), 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, identity);
-            rtcCommitGeometry(tile.instance.get());
-            rtcAttachGeometryByID(scene_.get(), tile.instance.get(), next_geometry_id());
-            device_.check("rtcAttachGeometryByID (tile instance)");
-            geometries_.push_back(info);
         }
+        if (index.empty()) return false;
+        tile.geometry.reset(rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_TRIANGLE));
+        device_.check("rtcNewGeometry (height-field tile)");
+        RTCGeometry g = tile.geometry.get();
+        const std::size_t nv = std::size_t(row) * std::size_t(tile.cj1 - tile.cj0 + 1);
+        tile.vertices = static_cast<float*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), nv));
+        auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                   3 * sizeof(unsigned), index.size() / 3));
+        device_.check("rtcSetNewGeometryBuffer (height-field tile)");
+        for (int j = tile.cj0; j <= tile.cj1; ++j) {
+            for (int i = tile.ci0; i <= tile.ci1; ++i) {
+                // The kernel's own vertex positions, bit for bit.
+                const Vec3 v = hf.vertex(i, j);
+                float* dst = tile.vertices + 3 * (std::size_t(j - tile.cj0) * row + std::size_t(i - tile.ci0));
+                dst[0] = v.x, dst[1] = v.y, dst[2] = v.z;
+            }
+        }
+        std::copy(index.begin(), index.end(), idx);
+        rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
+        return true;
+    }
+
+    // Puts a tile's geometry into the top scene: directly (flat layout) or as an instance
+    // of a scene of its own.
+    void attach_tile(Tile& tile) {
+        embree_detail::GeometryInfo info;
+        info.kind = HitKind::surface;
+        info.one_sided = true;
+        info.prim_to_tri = tile.prim_to_tri.data();
+        if (layout_ == EmbreeTileLayout::flat) {
+            attach(tile.geometry.get(), info, "height-field tile");
+            return;
+        }
+        tile.scene = new_scene();
+        rtcSetGeometryIntersectFilterFunction(tile.geometry.get(), &embree_detail::intersect_filter);
+        rtcCommitGeometry(tile.geometry.get());
+        rtcAttachGeometryByID(tile.scene.get(), tile.geometry.get(), 0);
+        rtcCommitScene(tile.scene.get());
+        device_.check("rtcCommitScene (height-field tile)");
+        tile.instance.reset(rtcNewGeometry(device_.get(), RTC_GEOMETRY_TYPE_INSTANCE));
+        device_.check("rtcNewGeometry (tile instance)");
+        rtcSetGeometryInstancedScene(tile.instance.get(), tile.scene.get());
+        constexpr float identity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};  // 3x4, column major
+        rtcSetGeometryTransform(tile.instance.get(), 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, identity);
+        rtcCommitGeometry(tile.instance.get());
+        rtcAttachGeometryByID(scene_.get(), tile.instance.get(), next_geometry_id());
+        device_.check("rtcAttachGeometryByID (tile instance)");
+        geometries_.push_back(info);
     }
 
     // Attaches a triangle geometry to the top scene, with the filter, as the next id.
