@@ -367,10 +367,11 @@ namespace design_detail {
 
 // What a full rebuild of an incremental trace costs per cell a ray crosses, beyond the
 // tracing itself: storing the crossing in both directions of the index, and the memory
-// it faults in. Measured on the grazing-light stress case (2 cores, 2026-11: 57.7
-// million crossings, 12-14 s a build on a loaded machine); coarse, and only used to
-// decide whether a time budget affords a level (Designer::trace_affordable).
-inline constexpr double rebuild_seconds_per_crossing = 150e-9;
+// it faults in. Measured on the grazing-light stress case (2 cores, 2026-11-28: 57.7
+// million crossings, 6.1 s a build on an idle machine, of which 0.5 s tracing; 12-14 s
+// under a load of 7); coarse, and only used to decide whether a time budget affords a
+// level (Designer::trace_affordable).
+inline constexpr double rebuild_seconds_per_crossing = 100e-9;
 
 inline std::string one_decimal(double x) {
     char b[32];
