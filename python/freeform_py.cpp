@@ -392,7 +392,8 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
                               freeform::thread_count(freeform::exec::omp_t{scene.optimise.threads}), limits);
     if (!target) target = freeform::io::load_target_image(scene, limits);
     const std::vector<freeform::ExportFormat> formats = freeform::io::export_formats(scene);
-    freeform::PlannedDesign plan = freeform::plan_design(scene, freeform::io::load_start_surface(scene, limits));
+    freeform::DesignSetup setup;
+    setup.initial = freeform::io::load_start_surface(scene, limits);
 
     ProgressState state;
     state.function = progress;
@@ -401,9 +402,8 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     std::map<std::string, std::string> files;
     {
         py::gil_scoped_release released;
-        freeform::DesignCallbacks callbacks;
-        callbacks.progress = [&](const freeform::DesignProgress& p) { return state.report(p); };
-        done = freeform::design(std::move(plan), *target, callbacks);
+        setup.callbacks.progress = [&](const freeform::DesignProgress& p) { return state.report(p); };
+        done = freeform::design(scene, *target, setup);
         json m = freeform::io::design_metrics_json(*done);
         m["command"] = "design";
         m["scene"] = ps.path ? json(*ps.path) : json(nullptr);

@@ -12,9 +12,12 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include <freeform/design/designer.hpp>
+#include <freeform/design/pipeline.hpp>
 #include <freeform/io/font.hpp>
 #include <freeform/surface/refine.hpp>
 
@@ -502,6 +505,96 @@ TEST_CASE("replicas share the start: made once, and a replica handed it designs 
     CHECK(taken.start.plan == plain.start.plan);
     CHECK(same_bits(taken.start.error, plain.start.error));
     CHECK(taken.start.levels_used == plain.start.levels_used);
+}
+
+// ------------------------------------------------------------------------- the one entry point
+
+// A term of a caller's own: every vertex pulled towards height 0.
+struct TowardsZeroTerm {
+    std::string_view name() const { return "towards_zero"; }
+    int radius() const { return 0; }
+    double cost(const HeightsView& h, int i, int j) const {
+        const double d = h(i, j) / 1e-4;
+        return d * d;
+    }
+};
+
+// design(scene, target, setup) (design/pipeline.hpp) gives the setup's penalties and start
+// surface to the annealing core and plans, anneals and finishes as a caller composing the
+// parts would, bit for bit; start_only is the start alone; the callbacks hear the phases.
+TEST_CASE("design(scene, target, setup): penalties, a start of the caller's, the start alone, the callbacks") {
+    SmallCase c = small_case();
+    c.scene.target = TargetSpec{};  // a transport start, as `freeform design` makes
+    c.scene.optimise = c.options;
+    DesignSetup quick;
+    quick.export_checks = false;
+    const CompletedDesign plain = design(c.scene, c.target, quick);
+    // The finish without the export: no part, no error_physical; the fitted traces run.
+    CHECK(plain.exported.fabrication.mesh.triangles.empty());
+    CHECK_FALSE(plain.error_physical());
+    CHECK(plain.fitted.error > 0);
+    const auto annealed = [&](std::optional<Heightmap> initial, const Penalties& penalties) {
+        PlannedDesign plan = plan_design(c.scene, std::move(initial));
+        return design(plan.scene, std::move(plan.initial), c.target, plan.scene.optimise, never_stop(), penalties);
+    };
+
+    SUBCASE("no penalties given: the options' own") {
+        DesignSetup given = quick;
+        given.penalties = default_penalties(c.scene.optimise, c.scene.surface.tool_radius);
+        check_identical(plain.result, design(c.scene, c.target, given).result);
+        check_identical(plain.result, annealed({}, *given.penalties));
+    }
+    SUBCASE("a term of the caller's") {
+        Penalties penalties = default_penalties(c.scene.optimise, c.scene.surface.tool_radius);
+        penalties.add(TowardsZeroTerm{}, 0.5);
+        DesignSetup setup = quick;
+        setup.penalties = penalties;
+        const CompletedDesign d = design(c.scene, c.target, setup);
+        check_identical(d.result, annealed({}, penalties));
+        CHECK(d.result.value.penalty > 0);
+        CHECK_FALSE(same_bits(d.result.surface.heights(), plain.result.surface.heights()));
+    }
+    SUBCASE("a start surface of the caller's") {
+        c.scene.surface.initial_shape = InitialShape::flat;
+        Heightmap tilted = surface_for(c.scene, SmallCase::mesh);
+        shape(tilted, [](double u, double) { return 0.01 * u; });
+        DesignSetup setup = quick;
+        setup.initial = tilted;
+        const CompletedDesign d = design(c.scene, c.target, setup);
+        check_identical(d.result, annealed(tilted, default_penalties(c.scene.optimise)));
+        CHECK_FALSE(same_bits(d.result.surface.heights(),
+                              design(c.scene, c.target, quick).result.surface.heights()));
+    }
+    SUBCASE("the start alone") {
+        DesignSetup setup = quick;
+        setup.start_only = true;
+        std::vector<std::string> phases;
+        setup.callbacks.phase = [&](const std::string& what) { phases.push_back(what); };
+        const CompletedDesign d = design(c.scene, c.target, setup);
+        CHECK(d.result.iterations == 0);
+        CHECK(d.result.stages.empty());
+        CHECK(d.result.start.used == StartKind::transport);
+        CHECK(d.result.start.plan == "the start only: no annealing");
+        PlannedDesign plan = plan_design(c.scene);
+        const DesignStart start = make_design_start(plan.scene, std::move(plan.initial), c.target,
+                                                    plan.scene.optimise.seed, 1);
+        CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
+        CHECK(phases == std::vector<std::string>{finding_the_start(c.scene)});
+        CHECK(d.fitted.error > 0);
+    }
+    SUBCASE("the callbacks: the phases in order, and a progress callback that stops the design") {
+        DesignSetup setup;  // the export and its checks too
+        std::vector<std::string> phases;
+        int reports = 0;
+        setup.callbacks.phase = [&](const std::string& what) { phases.push_back(what); };
+        setup.callbacks.progress = [&](const DesignProgress&) { return ++reports >= 2; };
+        const CompletedDesign d = design(c.scene, c.target, setup);
+        CHECK(reports == 2);
+        CHECK(d.result.stopped_early);
+        CHECK(phases == std::vector<std::string>{finding_the_start(c.scene),
+                                                 "exporting the surface and tracing the exported mesh"});
+        CHECK_FALSE(d.exported.fabrication.mesh.triangles.empty());
+    }
 }
 
 // With max_iterations below the plan's budget, every level still gets its share (the

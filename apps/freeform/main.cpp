@@ -7,7 +7,7 @@
 //
 // Built with MPI (CMake finds it) the same source also makes `freeform_mpi`: run under
 // `mpirun -np N freeform_mpi design ...` it designs by replica exchange, one replica per
-// rank (freeform/mpi/replica_exchange.hpp); rank 0 alone prints and writes the outputs.
+// rank (mpi::design, freeform/mpi/design.hpp); rank 0 alone prints and writes the outputs.
 // The plain `freeform` never needs an MPI runtime.
 //
 // Bad input (a scene key, a file, an option) prints one line on stderr and exits with 2;
@@ -42,10 +42,7 @@
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
 
-#include <freeform/mpi/replica_exchange.hpp>
-#if defined(__linux__)
-#include <sched.h>
-#endif
+#include <freeform/mpi/design.hpp>
 #endif
 
 namespace fs = std::filesystem;
@@ -368,45 +365,15 @@ bool abort_requested_here() {
     return v && *v && std::atoi(v) == world_rank;
 }
 
-// Cores this process may run on: its affinity mask, which mpirun sets when it binds
-// ranks (Open MPI binds each rank to one core when there are at most 2 ranks, to a
-// socket beyond, and not at all when oversubscribed). 0 where it cannot be read.
-int cores_available() {
-#if defined(__linux__)
-    cpu_set_t set;
-    CPU_ZERO(&set);
-    if (sched_getaffinity(0, sizeof set, &set) == 0) return CPU_COUNT(&set);
-#endif
-    return 0;
-}
-
-// Ranks x threads: the threads each rank runs (--threads; 0 = the cores it is bound to)
-// and the cores it may use, gathered on rank 0, which warns when a rank has more threads
-// than cores (they would take turns on its cores, slower than fewer threads).
-struct RankLayout {
-    std::vector<int> threads, cores;
-};
-
-RankLayout rank_layout(int threads) {
-    const int mine[2] = {threads, cores_available()};
-    std::vector<int> all(std::size_t(2 * world_size), 0);
-    mpi::detail::check(MPI_Gather(mine, 2, MPI_INT, all.data(), 2, MPI_INT, 0, MPI_COMM_WORLD), "MPI_Gather");
-    RankLayout l;
-    for (int r = 0; r < world_size; ++r) {
-        l.threads.push_back(all[std::size_t(2 * r)]);
-        l.cores.push_back(all[std::size_t(2 * r + 1)]);
-    }
-    if (world_rank != 0) return l;
-    for (int r = 0; r < world_size; ++r)
-        if (l.cores[std::size_t(r)] > 0 && l.threads[std::size_t(r)] > l.cores[std::size_t(r)]) {
-            std::fprintf(stderr,
-                         "freeform: warning: rank %d runs %d threads on the %d core(s) mpirun bound it to; give each "
-                         "rank its cores (mpirun --map-by slot:PE=%d, or --bind-to none) or use --threads %d\n",
-                         r, l.threads[std::size_t(r)], l.cores[std::size_t(r)], l.threads[std::size_t(r)],
-                         l.cores[std::size_t(r)]);
-            break;
-        }
-    return l;
+// Rank 0 warns when a rank runs more threads than the cores mpirun bound it to.
+void warn_of_overloaded_rank(const mpi::RankLayout& l) {
+    const int r = l.overloaded_rank();
+    if (r < 0) return;
+    const int threads = l.threads[std::size_t(r)], cores = l.cores[std::size_t(r)];
+    std::fprintf(stderr,
+                 "freeform: warning: rank %d runs %d threads on the %d core(s) mpirun bound it to; give each "
+                 "rank its cores (mpirun --map-by slot:PE=%d, or --bind-to none) or use --threads %d\n",
+                 r, threads, cores, threads, cores);
 }
 #endif
 
@@ -504,64 +471,8 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 files.c_str());
 }
 
-// metrics.json's "replicas" block: how the MPI ranks shared the design.
 #if defined(FREEFORM_WITH_MPI)
-struct ReplicaRun {
-    mpi::ReplicaOptions options;
-    RankLayout layout;
-    int winner = 0;
-    std::vector<double> objectives;
-    std::int64_t iterations_all = 0;
-};
-
-json replicas_json(const mpi::Replicas& replicas, const ReplicaRun& run, bool judged_held_out) {
-    const mpi::ReplicaOptions& o = run.options;
-    json r;
-    r["ranks"] = world_size;
-    r["mode"] = mpi::to_string(o.mode);
-    const bool domains = o.mode == mpi::ReplicaMode::domains;
-    if (domains) {
-        r["exchange"] = "surfaces: every rank's changes since the last merge are added up";
-        r["merges"] = replicas.merges();
-        json rows = json::array();
-        for (int k = 0; k < world_size; ++k) rows.push_back(json::array({double(k) / world_size, double(k + 1) / world_size}));
-        r["rows_per_rank"] = rows;  // fractions of the mesh's rows each rank moves
-        r["merge_coverage"] = o.merge_coverage;
-    } else {
-        r["ladder"] = "geometric";
-        r["ladder_ratio"] = o.ladder_ratio;
-        json scales = json::array();
-        for (int k = 0; k < world_size; ++k) scales.push_back(replicas.rung_scale(k));
-        r["rung_temperature_scales"] = scales;
-        r["exchange"] = "temperatures";
-        json pairs = json::array();
-        for (const auto& p : replicas.pairs())
-            pairs.push_back({{"rungs", json::array({p.cold_rung, p.cold_rung + 1})},
-                             {"proposed", p.proposed},
-                             {"accepted", p.accepted},
-                             {"acceptance", p.proposed > 0 ? double(p.accepted) / double(p.proposed) : 0.0}});
-        r["pairs"] = pairs;
-        r["winner_final_rung"] = replicas.rungs()[std::size_t(run.winner)];
-        r["final_rungs"] = replicas.rungs();
-    }
-    if (o.exchange_every > 0)
-        r["exchange_every"] = o.exchange_every;
-    else
-        r["exchange_every"] = domains ? "automatic: merges every merge_coverage x (mesh vertices / ranks) / kernel "
-                                        "support^2 iterations, at least 500; the ranks meet every 500 to stop "
-                                        "together"
-                                      : "automatic: 500";
-    r["exchange_points"] = replicas.exchange_points();
-    r["winner_rank"] = run.winner;
-    r["objectives"] = run.objectives;  // what picked the winner: held-out when checked
-    r["objectives_judged_on"] = judged_held_out ? "held-out rays" : "fitted rays";
-    r["iterations_all_ranks"] = run.iterations_all;
-    r["threads_per_rank"] = run.layout.threads;
-    r["cores_per_rank"] = run.layout.cores;  // cores each rank was bound to (0: unknown)
-    r["seeds"] = "rank 0: the seed's own streams; rank r: hash(stage seed, r)";
-    return r;
-}
-
+// The replica options of the command line (freeform_mpi only).
 mpi::ReplicaOptions replica_options(const DesignArgs& a) {
     mpi::ReplicaOptions o;
     o.mode = mpi::parse_replica_mode(a.replica_mode, "--replica-mode");
@@ -594,6 +505,107 @@ Scene design_scene(const DesignArgs& a, const Limits& limits) {
     return scene;
 }
 
+// What a design run shows while it works: its header line, the live status line (on a
+// terminal, unless --quiet), and Ctrl-C. Under MPI rank 0 alone reports.
+class DesignMonitor {
+public:
+    DesignMonitor(const DesignArgs& a, const Scene& scene)
+        : args_(a), scene_(scene), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
+
+    bool quiet() const { return quiet_; }
+    StatusLine& status() { return status_; }
+
+    // The line that opens a design, once. It goes out when design() has planned the scene
+    // (its first phase), so that a scene the plan refuses prints nothing on stdout.
+    void header() {
+        if (quiet_ || header_shown_) return;
+        header_shown_ = true;
+        const auto [nx, ny] = final_mesh(scene_);
+        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu\n",
+                    args_.scene.string().c_str(), nx, ny, scene_.receiver.width, scene_.receiver.height,
+                    fitting_rays_per_cell(scene_, nx, ny), scene_.optimise.time_budget,
+                    (unsigned long long)scene_.optimise.seed);
+    }
+
+    // The phases and the live line; the progress callback stops the design after Ctrl-C.
+    DesignCallbacks callbacks() {
+        DesignCallbacks callbacks;
+        callbacks.phase = [this](const std::string& what) {
+            header();
+            if (!quiet_) status_.show(what);
+        };
+        callbacks.progress = [this](const DesignProgress& p) {
+            status_.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
+                         std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
+                         fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
+                         fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
+                         " it/s | " + fixed(p.time_left, 1) + " s left");
+            return interrupted.load();
+        };
+        return callbacks;
+    }
+
+private:
+    const DesignArgs& args_;
+    const Scene& scene_;
+    bool quiet_;
+    StatusLine status_;
+    bool header_shown_ = false;
+};
+
+// A design as this process sees it: the design (empty on MPI ranks other than 0, which
+// write nothing) and, under MPI, metrics.json's "replicas" block.
+struct DesignRun {
+    std::optional<CompletedDesign> design;
+    bool stopped_early = false;
+    json replicas;  // null: no replicas ran
+};
+
+// The design itself: freeform::design, or mpi::design in freeform_mpi.
+DesignRun design_run(const DesignArgs& a, const Scene& scene, const ImageD& target, DesignSetup setup,
+                     DesignMonitor& monitor) {
+#if defined(FREEFORM_WITH_MPI)
+    mpi::ReplicaSetup replicas;
+    if (!a.start_only) replicas.options = replica_options(a);
+    replicas.layout = [&](const mpi::RankLayout& layout) {
+        monitor.header();
+        warn_of_overloaded_rank(layout);
+    };
+    if (abort_requested_here())
+        setup.callbacks.progress = [](const DesignProgress&) -> bool {
+            std::fprintf(stderr, "freeform: rank %d: dying on purpose (FREEFORM_TEST_ABORT_RANK)\n", world_rank);
+            std::abort();
+        };
+    mpi::ReplicaDesign r = mpi::design(scene, target, setup, MPI_COMM_WORLD, replicas);
+    return {std::move(r.design), r.stopped_early, r.replicas ? mpi::replicas_json(*r.replicas) : json()};
+#else
+    (void)a;
+    (void)monitor;
+    CompletedDesign d = design(scene, target, setup);
+    const bool stopped_early = d.result.stopped_early;
+    return {std::move(d), stopped_early, json()};
+#endif
+}
+
+// metrics.json, the files, and the summary of a finished design.
+void write_design(const DesignArgs& a, const CompletedDesign& d, const json& replicas, const ImageD& target,
+                  const std::vector<ExportFormat>& formats, DesignMonitor& monitor) {
+    json m = io::design_metrics_json(d);
+    m["command"] = "design";
+    m["scene"] = a.scene.string();
+    if (!replicas.is_null()) m["replicas"] = replicas;
+    // Keep catching Ctrl-C until the results are written: a second one must not leave
+    // half-written files (each file is written atomically, but the set should be whole).
+    StatusLine& status = monitor.status();
+    if (!monitor.quiet()) status.show("writing the results");
+    io::write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
+        if (!monitor.quiet()) status.show(what);
+    });
+    status.finish();
+    print_design_summary(d, m, a.out);
+}
+
+// `freeform design`: everything is read and checked before the design starts.
 int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
     const Scene scene = design_scene(a, limits);
@@ -601,88 +613,21 @@ int run_design(const DesignArgs& a) {
     check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits);
     const ImageD target = io::load_target_image(scene, limits);
     const std::vector<ExportFormat> formats = io::export_formats(scene);  // a format this build lacks: exit 2 now
-    PlannedDesign plan = plan_design(scene, io::load_start_surface(scene, limits));
+    DesignSetup setup;
+    setup.initial = io::load_start_surface(scene, limits);
+    setup.start_only = a.start_only;
 
     std::signal(SIGINT, on_sigint);
-    // With replicas, rank 0 alone reports: the other ranks run quiet.
-    const bool quiet = a.quiet || world_rank != 0;
-    StatusLine status(!quiet);
-    if (!quiet)
-        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu\n",
-                    a.scene.string().c_str(), plan.initial.nx(), plan.initial.ny(), scene.receiver.width,
-                    scene.receiver.height, plan.scene.light.rays_per_cell, scene.optimise.time_budget,
-                    (unsigned long long)scene.optimise.seed);
-    DesignCallbacks callbacks;
-    callbacks.phase = [&](const std::string& what) {
-        if (!quiet) status.show(what);
-    };
-    callbacks.progress = [&](const DesignProgress& p) {
-        status.show("level " + std::to_string(p.level + 1) + "/" + std::to_string(p.levels) + " kernel " +
-                    std::to_string(p.kernel_support) + " | it " + std::to_string(p.iteration) + " | T " +
-                    fixed(p.temperature * 1e6, 2) + "e-6 | error " + fixed(p.error, 4) + " | energy " +
-                    fixed(p.energy, 3) + " | " + std::to_string(std::int64_t(p.iterations_per_second)) +
-                    " it/s | " + fixed(p.time_left, 1) + " s left");
-        return interrupted.load();
-    };
-#if defined(FREEFORM_WITH_MPI)
-    std::optional<ReplicaRun> replica_run;
-    std::optional<mpi::Replicas> replicas;
-    CompletedDesign d;
-    if (a.start_only) {
-        // Rank 0 alone writes it: the others would only compute the same start.
-        if (world_rank != 0) return 0;
-        d = design_start(std::move(plan), target, callbacks);
-    } else {
-        ReplicaRun run{replica_options(a), {}, 0, {}, 0};
-        replicas.emplace(MPI_COMM_WORLD, scene.optimise.seed, run.options);
-        run.layout = rank_layout(thread_count(exec::omp_t{scene.optimise.threads}));
-        const bool abort_here = abort_requested_here();
-        const auto progress = callbacks.progress;
-        callbacks.progress = [&, progress](const DesignProgress& p) {
-            if (abort_here) {
-                std::fprintf(stderr, "freeform: rank %d: dying on purpose (FREEFORM_TEST_ABORT_RANK)\n", world_rank);
-                std::abort();
-            }
-            return progress(p);
-        };
-        callbacks.phase(finding_the_start(plan.scene));
-        DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
-                                     callbacks.progress, default_penalties(plan.scene.optimise, scene.surface.tool_radius),
-                                     *replicas);
-        run.iterations_all = replicas->sum_on_root(result.iterations);
-        // Ranks that share one surface all worked on the design: its moves are theirs.
-        if (replicas->shares_surface() && world_rank == 0) result.iterations = run.iterations_all;
-        run.winner = replicas->gather_best(result, &run.objectives);
-        // Only rank 0 goes on to evaluate and write the winner's design.
-        if (world_rank != 0) return result.stopped_early ? 130 : 0;
-        status.finish();
-        d = finish_design(plan.scene, std::move(result), target, callbacks);
-        replica_run = std::move(run);
-    }
-#else
-    const CompletedDesign d = a.start_only ? design_start(std::move(plan), target, callbacks)
-                                           : design(std::move(plan), target, callbacks);
-#endif
-    status.finish();
-
-    json m = io::design_metrics_json(d);
-    m["command"] = "design";
-    m["scene"] = a.scene.string();
-#if defined(FREEFORM_WITH_MPI)
-    if (replica_run) m["replicas"] = replicas_json(*replicas, *replica_run, d.result.held_out.total >= 0);
-#endif
-    // Keep catching Ctrl-C until the results are written: a second one must not leave
-    // half-written files (each file is written atomically, but the set should be whole).
-    if (!quiet) status.show("writing the results");
-    io::write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
-        if (!quiet) status.show(what);
-    });
-    status.finish();
-    print_design_summary(d, m, a.out);
+    DesignMonitor monitor(a, scene);
+    setup.callbacks = monitor.callbacks();
+    DesignRun run = design_run(a, scene, target, std::move(setup), monitor);
+    // Another MPI rank: rank 0 writes the winner's design.
+    if (!run.design) return run.stopped_early ? 130 : 0;
+    monitor.status().finish();
+    write_design(a, *run.design, run.replicas, target, formats, monitor);
     std::signal(SIGINT, SIG_DFL);
-    return d.result.stopped_early ? 130 : 0;
+    return run.design->result.stopped_early ? 130 : 0;
 }
-
 
 // An error message as one readable line, whatever the input put in it: control bytes
 // (a newline in a key, say) are escaped, and a message longer than 1,000 characters (a
@@ -796,8 +741,13 @@ struct CommandLine {
     bool is_export = false;
 };
 
+// --limit's help, the same for every command.
+constexpr const char* limit_help =
+    "NAME=VALUE: raise or lower a resource limit (repeatable): json_depth (64), scene_file_bytes (16MiB), "
+    "data_file_bytes (4GiB), pixels (67108864), triangles (67108864), memory_bytes (16GiB); docs/limits.md";
+
 // The `export` subcommand's options.
-CLI::App* add_export_command(CLI::App& app, ExportArgs& ea, const char* limit_help) {
+CLI::App* add_export_command(CLI::App& app, ExportArgs& ea) {
     CLI::App* cmd = app.add_subcommand(
         "export", "write a height map's surface as STEP, a grid sag table, STL or OBJ, without designing (docs/export.md)");
     cmd->add_option("scene", ea.scene, "scene file (JSON): the surface's placement, material and target")->required();
@@ -811,20 +761,8 @@ CLI::App* add_export_command(CLI::App& app, ExportArgs& ea, const char* limit_he
     return cmd;
 }
 
-// Parses argv into `cl`. Returns the exit code when parsing ends the program (help,
-// version, a usage error: one line on stderr, exit 2), nothing when the command runs.
-std::optional<int> parse_command_line(int argc, const char* const* argv, CommandLine& cl) {
-    RenderArgs& ra = cl.render;
-    DesignArgs& da = cl.design;
-    CLI::App app{"freeform: design freeform reflectors and lenses that throw a target image onto a plane.\n"
-                 "Scene files are described in docs/scene.md.",
-                 "freeform"};
-    app.set_version_flag("--version", version);
-    app.require_subcommand(1);
-
-    constexpr const char* limit_help =
-        "NAME=VALUE: raise or lower a resource limit (repeatable): json_depth (64), scene_file_bytes (16MiB), "
-        "data_file_bytes (4GiB), pixels (67108864), triangles (67108864), memory_bytes (16GiB); docs/limits.md";
+// The `render` subcommand's options.
+CLI::App* add_render_command(CLI::App& app, RenderArgs& ra) {
     CLI::App* render = app.add_subcommand("render", "trace a scene's surface (or a heightmap / mesh) and write its irradiance");
     render->add_option("scene", ra.scene, "scene file (JSON)")->required();
     render->add_option("--out", ra.out, "output directory (irradiance.pfm/.png, metrics.json)")->required();
@@ -844,7 +782,33 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
     render->add_option("--seed", ra.seed, "ray jitter seed (default: the scene's optimise.seed)")
         ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
     render->add_option("--limit", ra.limits, limit_help)->allow_extra_args(false);
+    return render;
+}
 
+#if defined(FREEFORM_WITH_MPI)
+// The `design` subcommand's replica options (freeform_mpi only).
+void add_replica_options(CLI::App* design_cmd, DesignArgs& da) {
+    design_cmd->add_option("--replica-mode", da.replica_mode,
+                           "domains (default): the ranks share one design, each moving a strip of the mesh, merged "
+                           "at exchange points; tempering: each rank a replica of the design at its own temperature, "
+                           "the best one wins");
+    design_cmd->add_option("--ladder-ratio", da.ladder_ratio,
+                           "replica exchange: temperature scale of rung k is RATIO^k (default 1.5)")
+        ->check(CLI::Range(1.0, 1e6));
+    design_cmd->add_option("--exchange-every", da.exchange_every,
+                           "iterations between exchanges (tempering) or merges (domains); 0 = automatic (default): "
+                           "500 for tempering, for domains as many as move each vertex of a rank's strip about "
+                           "--merge-coverage times")
+        ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
+    design_cmd->add_option("--merge-coverage", da.merge_coverage,
+                           "domains: moves per vertex of a strip between merges, when --exchange-every is 0 "
+                           "(default 30)")
+        ->check(CLI::Range(1e-3, 1e6));
+}
+#endif
+
+// The `design` subcommand's options.
+CLI::App* add_design_command(CLI::App& app, DesignArgs& da) {
     CLI::App* design_cmd = app.add_subcommand("design", "optimise the surface so that its light matches the target");
     design_cmd->add_option("scene", da.scene, "scene file (JSON) with a target")->required();
     design_cmd->add_option("--out", da.out,
@@ -864,24 +828,22 @@ std::optional<int> parse_command_line(int argc, const char* const* argv, Command
     design_cmd->add_flag("--start-only", da.start_only,
                          "write the start surface alone (the transport surface by default), without annealing");
 #if defined(FREEFORM_WITH_MPI)
-    design_cmd->add_option("--replica-mode", da.replica_mode,
-                           "domains (default): the ranks share one design, each moving a strip of the mesh, merged "
-                           "at exchange points; tempering: each rank a replica of the design at its own temperature, "
-                           "the best one wins");
-    design_cmd->add_option("--ladder-ratio", da.ladder_ratio,
-                           "replica exchange: temperature scale of rung k is RATIO^k (default 1.5)")
-        ->check(CLI::Range(1.0, 1e6));
-    design_cmd->add_option("--exchange-every", da.exchange_every,
-                           "iterations between exchanges (tempering) or merges (domains); 0 = automatic (default): "
-                           "500 for tempering, for domains as many as move each vertex of a rank's strip about "
-                           "--merge-coverage times")
-        ->check(CLI::Range(std::int64_t{0}, std::numeric_limits<std::int64_t>::max()));
-    design_cmd->add_option("--merge-coverage", da.merge_coverage,
-                           "domains: moves per vertex of a strip between merges, when --exchange-every is 0 "
-                           "(default 30)")
-        ->check(CLI::Range(1e-3, 1e6));
+    add_replica_options(design_cmd, da);
 #endif
-    CLI::App* export_cmd = add_export_command(app, cl.export_, limit_help);
+    return design_cmd;
+}
+
+// Parses argv into `cl`. Returns the exit code when parsing ends the program (help,
+// version, a usage error: one line on stderr, exit 2), nothing when the command runs.
+std::optional<int> parse_command_line(int argc, const char* const* argv, CommandLine& cl) {
+    CLI::App app{"freeform: design freeform reflectors and lenses that throw a target image onto a plane.\n"
+                 "Scene files are described in docs/scene.md.",
+                 "freeform"};
+    app.set_version_flag("--version", version);
+    app.require_subcommand(1);
+    CLI::App* render = add_render_command(app, cl.render);
+    add_design_command(app, cl.design);
+    CLI::App* export_cmd = add_export_command(app, cl.export_);
     app.footer("Ctrl-C during a design stops it at the next iteration and writes the best result so far.\n"
                "Exit codes: 0 success, 2 bad input, a limit exceeded (docs/limits.md) or a file that cannot be read or "
                "written, 1 internal error, 130 design interrupted (results written).");

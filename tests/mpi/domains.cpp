@@ -6,6 +6,10 @@
 //   3. a whole design: every rank ends holding the same surface bit for bit, each stage
 //      merged at least once, the design's error below its start's, and a second run
 //      with the same seed ends on the same surface.
+//   4. the same through mpi::design (freeform/mpi/design.hpp), the one entry point: rank 0
+//      alone holds the finished design, on the surface the annealing core with the
+//      coordinator ends on; every rank reports the run (merges, the winner, rank 0 the
+//      moves of all ranks and the layout); the start alone runs on rank 0 alone.
 #include <mpi.h>
 
 #include <cmath>
@@ -14,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include <freeform/mpi/design.hpp>
 #include <freeform/mpi/replica_exchange.hpp>
 
 #include "../support.hpp"
@@ -76,23 +81,33 @@ void check_merge(mpi::Replicas& replicas) {
     expect(replicas.merges() == 1, "merges counted");
 }
 
-std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& stages, double& error_start,
-                               double& error_end) {
+mpi::ReplicaOptions domains_every(std::int64_t iterations) {
     mpi::ReplicaOptions ro;
     ro.mode = mpi::ReplicaMode::domains;
-    ro.exchange_every = 150;
-    mpi::Replicas replicas(MPI_COMM_WORLD, seed, ro);
+    ro.exchange_every = iterations;
+    return ro;
+}
+
+// A small design: 31² mesh on a 40² receiver, flat start, 1,500 iterations a rank.
+Scene small_scene(std::uint64_t seed) {
     Scene s = testing::basic_scene(40, 8);
     s.surface.nx = s.surface.ny = 31;
     s.receiver.deposit = Deposit::bilinear;
     s.target = TargetSpec{};
     s.surface.initial_shape = InitialShape::flat;
+    s.optimise.seed = seed;
+    s.optimise.time_budget = 0;
+    s.optimise.max_iterations = 1500;
+    s.optimise.threads = 1;
+    return s;
+}
+
+std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& stages, double& error_start,
+                               double& error_end) {
+    mpi::Replicas replicas(MPI_COMM_WORLD, seed, domains_every(150));
+    const Scene s = small_scene(seed);
     const ImageD target = testing::two_blocks(40, 40);
-    DesignOptions o = s.optimise;
-    o.seed = seed;
-    o.time_budget = 0;
-    o.max_iterations = 1500;
-    o.threads = 1;
+    const DesignOptions& o = s.optimise;
     const DesignResult r =
         design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; }, default_penalties(o),
                replicas);
@@ -100,6 +115,47 @@ std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& sta
     error_start = r.stages.front().error_start;
     error_end = r.value.error;
     return r.surface.heights();
+}
+
+void check_mpi_design() {
+    const Scene s = small_scene(13);
+    const ImageD target = testing::two_blocks(40, 40);
+    DesignSetup setup;
+    setup.export_checks = false;
+    mpi::ReplicaSetup rs;
+    rs.options = domains_every(150);
+    int layouts = 0;
+    rs.layout = [&](const mpi::RankLayout& l) {
+        ++layouts;
+        expect(int(l.threads.size()) == size && l.threads.front() == 1, "the layout lists every rank's threads");
+    };
+    const mpi::ReplicaDesign r = mpi::design(s, target, setup, MPI_COMM_WORLD, rs);
+    expect(r.design.has_value() == (rank == 0), "rank 0 alone holds the design");
+    expect(layouts == (rank == 0 ? 1 : 0), "the layout is handed to rank 0 alone");
+    expect(!r.stopped_early, "the design ran to its budget");
+    expect(r.replicas && r.replicas->ranks == size && r.replicas->winner == 0 && r.replicas->merges >= 1,
+           "every rank reports the run: its ranks, merges, and rank 0 winning (one shared surface)");
+
+    // The annealing core with the coordinator, on the scene as design() plans it.
+    PlannedDesign plan = plan_design(s);
+    mpi::Replicas replicas(MPI_COMM_WORLD, s.optimise.seed, domains_every(150));
+    const DesignResult core = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
+                                     [](const DesignProgress&) { return false; },
+                                     default_penalties(plan.scene.optimise), replicas);
+    if (rank == 0 && r.design) {
+        const CompletedDesign& d = *r.design;
+        expect(d.result.surface.heights() == core.surface.heights(),
+               "mpi::design ends on the surface of the core's design over the same ranks");
+        expect(r.replicas->iterations_all == d.result.iterations && d.result.iterations == size * core.iterations,
+               "domains: the design's moves are every rank's");
+        expect(d.fitted.error > 0 && !d.error_physical(), "finished on rank 0, the export left out");
+    }
+
+    setup.start_only = true;
+    const mpi::ReplicaDesign start = mpi::design(s, target, setup, MPI_COMM_WORLD, rs);
+    expect(start.design.has_value() == (rank == 0) && !start.replicas && !start.stopped_early,
+           "the start alone: rank 0 alone, no replicas");
+    if (start.design) expect(start.design->result.iterations == 0, "the start alone is not annealed");
 }
 
 }  // namespace
@@ -129,11 +185,12 @@ int main(int argc, char** argv) {
         double s2 = 0, e2 = 0;
         const std::vector<float> b = design_once(11, again_stages, s2, e2);
         expect(a == b, "the same seed and rank count give the same design");
+        check_mpi_design();
         if (rank == 0 && testing::mpi_check::failures == 0)
             std::printf("ok   domains over %d ranks: %zu stages, error %.4f -> %.4f\n", size, stages.size(), start, end);
     } catch (const std::exception& e) {
         expect(false, std::string("unexpected exception: ") + e.what());
     }
     return testing::mpi_check::finish("ok   domains over " + std::to_string(size) +
-                  " ranks: strips, merges and a whole design agree on every rank");
+                  " ranks: strips, merges, a whole design and mpi::design agree on every rank");
 }

@@ -9,8 +9,14 @@
 //     const freeform::CompletedDesign d = freeform::design(scene, freeform::io::load_target_image(scene));
 //     freeform::io::write_stl("letter-e.stl", d.exported.fabrication.mesh);
 //
+// One entry point, design(scene, target, setup), one result, CompletedDesign. A
+// DesignSetup (below) carries what a caller may change: callbacks, penalty terms of its
+// own, a start surface of its own, the start alone. mpi::design (freeform/mpi/design.hpp,
+// freeform::mpi) is the same call over MPI ranks. Its parts, for callers that compose
+// their own: plan_design, finish_design, and the annealing core (design/designer.hpp).
+//
 // No I/O here: the scene, its target image and (when the scene starts from a PFM file)
-// the start surface come in loaded (io/scene_file.hpp, io/target.hpp).
+// the start surface come in loaded (io/scene_file.hpp, io/target.hpp, io/heightmap.hpp).
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -45,8 +51,9 @@ struct DesignCallbacks {
     // Every optimise.progress_every iterations; returning true stops the design (the best
     // surface so far is kept and finished like a complete one).
     std::function<bool(const DesignProgress&)> progress;
-    // Before each long step that reports no progress of its own: "finding the start",
-    // "exporting the surface and tracing the exported mesh".
+    // Before each long step that reports no progress of its own: "finding the start" (the
+    // first, once plan_design has accepted the scene), "exporting the surface and tracing
+    // the exported mesh".
     std::function<void(const std::string&)> phase;
 };
 
@@ -77,7 +84,7 @@ inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> in
     } else {
         if (!scene.surface.initial_pfm.empty())
             throw InputError("surface.initial: the start is a PFM file; load it (io::load_start_surface) and "
-                             "pass it to design()");
+                             "pass it to design() (DesignSetup::initial)");
         p.initial = initial_surface(p.scene, nx, ny);
     }
     // A transport start the scene asks for by name must be possible: say so before any work.
@@ -191,9 +198,10 @@ struct CompletedDesign {
 };
 
 // Smooths (optimise.smooth_iterations), cuts with the tool (surface.tool_radius) and
-// judges an annealed design: the fitted and held-out errors, the export and its cell means.
+// judges an annealed design: the fitted and held-out errors, the export and its cell means
+// (`export_checks`: DesignSetup::export_checks).
 inline CompletedDesign finish_design(const Scene& scene, DesignResult result, const ImageD& target,
-                                     const DesignCallbacks& callbacks = {}) {
+                                     const DesignCallbacks& callbacks = {}, bool export_checks = true) {
     const auto t0 = std::chrono::steady_clock::now();
     const DesignOptions& options = scene.optimise;
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
@@ -205,33 +213,42 @@ inline CompletedDesign finish_design(const Scene& scene, DesignResult result, co
     d.fitted = trace_design(scene, d.result.surface, target, options.seed, threads);
     if (d.result.held_out.total >= 0)
         d.error_held_out = trace_design(scene, d.result.surface, target, d.result.held_out_seed, threads).error;
-    if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
-    d.exported = check_export(scene, d.result.surface, d.fitted, target, threads);
+    if (export_checks) {
+        if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
+        d.exported = check_export(scene, d.result.surface, d.fitted, target, threads);
+    }
     d.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return d;
 }
 
-// Designs a planned scene (plan_design) so that its light matches `target` (relative
-// irradiance, any resolution: io::load_target_image makes it from the scene's target
-// block).
-inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase(finding_the_start(plan.scene));
-    const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
-    DesignResult result = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise, progress);
-    return finish_design(plan.scene, std::move(result), target, callbacks);
-}
+// How a design runs: what the caller hears, and what it changes. Every field may be left
+// as it is: `design(scene, target)` is `freeform design`.
+struct DesignSetup {
+    DesignCallbacks callbacks;
+    // The height terms of the objective (objective/penalty.hpp). Empty: the terms the
+    // scene's options ask for, default_penalties(scene.optimise, scene.surface.tool_radius).
+    // To add a term of your own, start from those and add it (docs/library.md, "A custom
+    // term"); a Penalties given here replaces them whole.
+    std::optional<Penalties> penalties;
+    // The surface the design starts from, on the final mesh (io::load_start_surface reads
+    // the PFM file a scene names as its start). Empty: the scene's own start (flat, a
+    // paraboloid, the transport start); a scene whose start is a PFM file is then refused.
+    std::optional<Heightmap> initial;
+    // true: the start alone (the transport surface, or whatever the scene starts from),
+    // judged and finished like a design but not annealed; the penalties are then unused.
+    // What `freeform design --start-only` writes.
+    bool start_only = false;
+    // false: the finish leaves out the export and its checks (CompletedDesign::exported
+    // stays empty, error_physical() too): for a caller that judges the surface its own way
+    // and needs neither the part nor its figures, such as the study (benchmarks/study).
+    // Smoothing, the tool's cut and the fitted and held-out traces still run.
+    bool export_checks = true;
+};
 
-// Plans and designs `scene`. `initial`: a start surface of the caller's (see plan_design).
-// Throws InputError for a scene that cannot be designed.
-inline CompletedDesign design(const Scene& scene, const ImageD& target, const DesignCallbacks& callbacks = {},
-                              std::optional<Heightmap> initial = {}) {
-    return design(plan_design(scene, std::move(initial)), target, callbacks);
-}
+namespace pipeline_detail {
 
-// The start alone (the transport surface, or whatever the scene starts from), judged and
-// finished like a design but not annealed: what `freeform design --start-only` writes.
-inline CompletedDesign design_start(PlannedDesign plan, const ImageD& target, const DesignCallbacks& callbacks = {}) {
-    if (callbacks.phase) callbacks.phase(finding_the_start(plan.scene));
+// The start of a planned design alone, as a DesignResult of no iterations.
+inline DesignResult start_only(PlannedDesign& plan, const ImageD& target) {
     const auto t0 = std::chrono::steady_clock::now();
     DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.scene.optimise.seed,
                                           thread_count(exec::omp_t{plan.scene.optimise.threads}));
@@ -240,7 +257,52 @@ inline CompletedDesign design_start(PlannedDesign plan, const ImageD& target, co
     result.start.plan = "the start only: no annealing";
     result.surface = std::move(start.surface);
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    return finish_design(plan.scene, std::move(result), target, callbacks);
+    return result;
+}
+
+// Anneals a planned design, its start included, as one replica of `replicas`
+// (design/replicas.hpp; SingleReplica: the plain design), with the setup's penalties and
+// progress callback.
+template <ReplicaCoordinator Replicas>
+DesignResult anneal(PlannedDesign& plan, const ImageD& target, const DesignSetup& setup, Replicas& replicas) {
+    const DesignCallbacks& callbacks = setup.callbacks;
+    const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
+    const DesignOptions& options = plan.scene.optimise;
+    return freeform::design(plan.scene, std::move(plan.initial), target, options, progress,
+                            setup.penalties ? *setup.penalties
+                                            : default_penalties(options, plan.scene.surface.tool_radius),
+                            replicas);
+}
+
+// The finish the setup asks for (finish_design).
+inline CompletedDesign finish(const PlannedDesign& plan, DesignResult result, const ImageD& target,
+                              const DesignSetup& setup) {
+    return finish_design(plan.scene, std::move(result), target, setup.callbacks, setup.export_checks);
+}
+
+// A planned design on one replica: the start, the annealing unless setup.start_only, the
+// finish.
+inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignSetup& setup) {
+    if (setup.callbacks.phase) setup.callbacks.phase(finding_the_start(plan.scene));
+    DesignResult result;
+    if (setup.start_only) {
+        result = start_only(plan, target);
+    } else {
+        SingleReplica single;
+        result = anneal(plan, target, setup, single);
+    }
+    return finish(plan, std::move(result), target, setup);
+}
+
+}  // namespace pipeline_detail
+
+// Designs `scene` so that its light matches `target` (relative irradiance, any
+// resolution: io::load_target_image makes it from the scene's target block): plans it
+// (plan_design), makes the start, anneals, and finishes the result (finish_design). The
+// one entry point of a design; mpi::design (freeform/mpi/design.hpp) is the same over MPI
+// ranks. Throws InputError for a scene that cannot be designed.
+inline CompletedDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup = {}) {
+    return pipeline_detail::design(plan_design(scene, setup.initial), target, setup);
 }
 
 }  // namespace freeform
