@@ -6,8 +6,9 @@
 // Any type with name(), radius() and cost(heights, i, j) is a LocalHeightTerm
 // (objective/penalty.hpp): the objective keeps the sum of its per-vertex costs exact
 // under incremental moves, so a term needs no bookkeeping of its own. Add it to the
-// penalties the options ask for and pass them to freeform::design(). The same design
-// runs twice, without and with the term, and the program prints what the term changed.
+// penalties the options ask for and give them to freeform::design() in its DesignSetup.
+// The same design runs twice, without and with the term, and the program prints what
+// the term changed.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -16,7 +17,7 @@
 #include <string>
 #include <string_view>
 
-#include <freeform/design/designer.hpp>
+#include <freeform/design/pipeline.hpp>
 #include <freeform/io.hpp>
 
 using namespace freeform;
@@ -63,24 +64,30 @@ int main(int argc, char** argv) {
         scene.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
         scene.receiver.width = scene.receiver.height = 100;
         scene.surface.nx = scene.surface.ny = 51;
-        const ImageD target = io::render_text("T", io::find_font("DejaVuSans-Bold"), 400, 400, 0.15).cast<double>();
-        DesignOptions options;
-        options.max_iterations = iterations;  // a fixed budget: the same result on any machine
-        options.time_budget = 600;
+        // A flat start, so that the rim begins on the mounting plane (the transport start,
+        // the default, is centred in the height bounds: its rim stands a millimetre off).
+        scene.surface.initial_shape = InitialShape::flat;
+        TargetSpec t;
+        t.text = "T";
+        t.margin = 0.15;
+        scene.target = t;
+        const ImageD target = io::load_target_image(scene);
+        scene.optimise.max_iterations = iterations;  // a fixed budget: the same result on any machine
+        scene.optimise.time_budget = 600;
 
-        const auto quiet = [](const DesignProgress&) { return false; };
         const FlatRimTerm rim;
         for (const bool with_term : {false, true}) {
-            Penalties penalties = default_penalties(options);
+            // The terms the options ask for, and the rim's added to them.
+            Penalties penalties = default_penalties(scene.optimise, scene.surface.tool_radius);
             if (with_term) penalties.add(rim, 0.05);
-            const DesignResult r = design(scene, Heightmap(51, 51, scene.surface.size, scene.surface.h_min,
-                                                           scene.surface.h_max, scene.surface.frame),
-                                          target, options, quiet, penalties);
+            DesignSetup setup;
+            setup.penalties = penalties;
+            const CompletedDesign d = design(scene, target, setup);
             std::printf("%-17s error %.3f, energy %.3f, rim RMS height %6.1f um\n",
-                        with_term ? "with flat_rim:" : "without the term:", r.value.error, r.value.energy,
-                        rim_rms_um(r.surface, rim.width));
+                        with_term ? "with flat_rim:" : "without the term:", d.fitted.error, d.fitted.totals.energy(),
+                        rim_rms_um(d.result.surface, rim.width));
             io::write_png(out / (with_term ? "with_term.png" : "without_term.png"),
-                          io::tone_map(r.irradiance.to_image()));
+                          io::tone_map(d.fitted.histogram.to_image()));
         }
         std::printf("irradiance images in %s/\n", out.string().c_str());
         return 0;

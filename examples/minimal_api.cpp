@@ -3,15 +3,14 @@
 //
 //   build/release/bin/minimal_api [OUTPUT_DIR]    (default: minimal_api_out)
 //
-// Writes heightmap.pfm (heights in metres), surface.obj (the Phong-tessellated mirror,
-// the same surface the tracer saw) and irradiance.png, then prints error and energy.
+// Writes heightmap.pfm (heights in metres), surface.obj (the part to mill: the exported
+// facets) and irradiance.png, then prints the design's errors and energy.
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 
-#include <freeform/design/designer.hpp>
+#include <freeform/design/pipeline.hpp>
 #include <freeform/io.hpp>
-#include <freeform/surface/export.hpp>
 
 int main(int argc, char** argv) try {
     using namespace freeform;
@@ -30,31 +29,35 @@ int main(int argc, char** argv) try {
     scene.receiver.size = {0.2, 0.2};
     scene.receiver.width = scene.receiver.height = 100;
 
-    // 2. The target: any grey image (relative irradiance, any resolution). Only its shape
-    //    matters; the designer scales it to the light that reaches the mirror.
-    const ImageD target = io::render_text("A", io::find_font("DejaVuSans-Bold"), 400, 400, 0.1).cast<double>();
+    // 2. The target: the letter A (any grey image would do: relative irradiance, any
+    //    resolution; only its shape matters, the designer scales it to the light that
+    //    reaches the mirror).
+    TargetSpec a;
+    a.text = "A";
+    scene.target = a;
+    const ImageD target = io::load_target_image(scene);
 
-    // 3. Design from a flat mirror. A time budget bounds the run; set max_iterations as
-    //    well for a run that does not depend on the machine's speed.
-    const SurfaceSpec& s = scene.surface;
-    Heightmap flat(s.nx, s.ny, s.size, s.h_min, s.h_max, s.frame, s.aperture);
-    DesignOptions options = scene.optimise;
-    options.time_budget = 10;
-    options.progress_every = 20000;
-    const DesignResult r = design(scene, std::move(flat), target, options, [](const DesignProgress& p) {
+    // 3. Design: the transport start, annealing, the part exported and judged. A time
+    //    budget bounds the run; set max_iterations as well for a run that does not depend
+    //    on the machine's speed.
+    scene.optimise.time_budget = 10;
+    scene.optimise.progress_every = 20000;
+    DesignSetup setup;
+    setup.callbacks.progress = [](const DesignProgress& p) {
         std::printf("level %d/%d (mesh %3d, %3d px) kernel %2d  iteration %6lld  error %.4f  energy %.4f\n",
                     p.level + 1, p.levels, p.mesh, p.resolution, p.kernel_support, static_cast<long long>(p.iteration),
                     p.error, p.energy);
-        return false;  // true would stop the design (the best state so far is kept)
-    });
+        return false;  // true would stop the design (the best state so far is finished and returned)
+    };
+    const CompletedDesign d = design(scene, target, setup);
 
     // 4. Save (heightmap.pfm: image row 0 is the +v edge, io/heightmap.hpp).
-    const Heightmap& hm = r.surface;
-    io::write_heightmap(out / "heightmap.pfm", hm);
-    io::write_obj(out / "surface.obj", tessellate_surface(hm, float(s.phong_alpha), 4));
-    io::write_png(out / "irradiance.png", io::tone_map(r.irradiance.to_image()));
-    std::printf("error %.4f, energy %.4f after %lld iterations in %.1f s; results in %s/\n", r.value.error,
-                r.value.energy, static_cast<long long>(r.iterations), r.seconds, out.string().c_str());
+    io::write_heightmap(out / "heightmap.pfm", d.result.surface);
+    io::write_obj(out / "surface.obj", d.exported.fabrication.mesh);
+    io::write_png(out / "irradiance.png", io::tone_map(d.fitted.histogram.to_image()));
+    std::printf("error %.4f, energy %.4f (error_physical %.4f) after %lld iterations in %.1f s; results in %s/\n",
+                d.fitted.error, d.fitted.totals.energy(), d.error_physical().value_or(-1.0),
+                static_cast<long long>(d.result.iterations), d.result.seconds, out.string().c_str());
     return 0;
 } catch (const freeform::InputError& e) {  // bad input or a file problem (IoError)
     std::fprintf(stderr, "minimal_api: %s\n", e.what());

@@ -8,12 +8,13 @@
 //             [--check-render] [--compare-tracers] [--save-images PREFIX] [--start-only]
 //
 // Engines:
-//   design        the library's designer, freeform::design(): ours and every variant of it
-//                 (ablations, full-retrace evaluation, one kernel shape, ...) is a --patch of
-//                 the scene's "optimise"/"surface"/"light" keys. With --start-only it
-//                 makes the design's start alone (freeform::make_design_start: the
-//                 transport surface for a scene with a target, unless the patch asks for
-//                 another start) with the run's seed, no annealing: "transport-only"
+//   design        the library's design, freeform::design() as `freeform design` runs it
+//                 (design/pipeline.hpp, without the export checks): ours and every variant
+//                 of it (ablations, full-retrace evaluation, one kernel shape, ...) is a
+//                 --patch of the scene's "optimise"/"surface"/"light" keys. With
+//                 --start-only it makes the design's start alone (DesignSetup::start_only:
+//                 the transport surface for a scene with a target, unless the patch asks
+//                 for another start) with the run's seed, no annealing: "transport-only"
 //   spsa          SPSA on the control grid (spsa.hpp)
 //   pagmo-sa, pagmo-cmaes, pagmo-xnes, pagmo-sade   pagmo2 on the control grid (generic.hpp)
 //   nlopt-bobyqa, nlopt-crs2                        NLopt on the control grid (generic.hpp)
@@ -29,6 +30,8 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
+
+#include <freeform/design/pipeline.hpp>
 
 #include "common.hpp"
 #include "control_grid.hpp"
@@ -91,6 +94,91 @@ std::vector<TracePoint> trace_of(const DesignResult& r) {
     return t;
 }
 
+// The design engine: freeform::design() (design/pipeline.hpp) on the run's scene, as
+// `freeform design` runs it (the plan raises the final level's rays to
+// optimise.min_rays_per_mesh_cell per mesh cell, so that a design cannot fit its rays'
+// noise; smoothing and the tool's cut as the scene asks), without the export checks: the
+// surface is judged below like every other engine's. With --start-only the start alone
+// (the transport surface for a scene with a target, unless the patch asks for another
+// start): "transport-only". Fills `out`, `model` and the trace; returns the surface.
+Heightmap run_design_engine(const Args& a, Scene scene, const ImageD& target, json& out, json& model,
+                            std::vector<TracePoint>& trace, int& trace_levels) {
+    DesignOptions& o = scene.optimise;
+    o.seed = a.seed;
+    o.time_budget = a.time_budget;
+    o.threads = a.threads;
+    o.progress_every = a.progress_every;
+    if (a.kernel_supports > 0) {
+        o.levels = plan_levels(scene);
+        for (auto& l : o.levels) l.kernel_supports = {a.kernel_supports};
+    }
+    DesignSetup setup;
+    setup.initial = io::load_start_surface(scene);
+    setup.start_only = a.start_only;
+    setup.export_checks = false;
+    CompletedDesign d = design(scene, target, setup);
+    DesignResult& r = d.result;
+    // The designer's own clock: the start (solve, fit and its exact-tracer check) and the
+    // annealing, not the finish's traces.
+    const double seconds = r.seconds;
+    model["rays_per_cell"] = d.scene.light.rays_per_cell;
+    model["start"] = to_string(r.start.used);
+    out["seconds"] = seconds;
+    out["iterations"] = r.iterations;
+    out["evaluations"] = r.iterations;
+    out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
+    out["start"] = io::start_report_json(r.start);
+    if (a.start_only) {
+        // One trace point: the start's error and energy as the library measured them (run
+        // seed, final receiver resolution; the objective is not computed there: 0).
+        if (r.start.error >= 0) trace.push_back({seconds, 0, 0, r.start.error, r.start.energy, 0.0});
+        return std::move(r.surface);
+    }
+    trace = trace_of(r);
+    std::int64_t proposals = 0;
+    int levels = 0;
+    for (const auto& s : r.stages) proposals += s.proposals_evaluated, levels = std::max(levels, s.level + 1);
+    trace_levels = std::max(1, levels);
+    out["proposals_evaluated"] = proposals;
+    out["accepted"] = r.accepted;
+    out["stages"] = io::stage_reports_json(r.stages);
+    out["bandit"] = to_string(o.bandit);
+    out["evaluation"] = to_string(o.evaluation);
+    out["kernel_shapes"] = to_string(o.kernel_shapes);
+    out["max_iterations"] = o.max_iterations;
+    out["stop_reasons"] = json::array();
+    for (const auto& s : r.stages) out["stop_reasons"].push_back(to_string(s.stop_reason));
+    out["bandit_weights"] = r.bandit_weights;
+    json bank = json::array();
+    for (const auto& k : r.kernel_bank) {
+        // Which shape of the standard bank this is (the history bandit's pre-process keeps
+        // a subset), so that weights can be compared across runs and cases.
+        int index = -1;
+        const auto standard = default_kernel_bank(std::max(3, k.support | 1));
+        for (std::size_t j = 0; j < standard.size(); ++j)
+            if (standard[j].sigma_x == k.sigma_x && standard[j].sigma_y == k.sigma_y && standard[j].rho == k.rho)
+                index = int(j);
+        bank.push_back({{"sigma_x", k.sigma_x},
+                        {"sigma_y", k.sigma_y},
+                        {"rho", k.rho},
+                        {"support", k.support},
+                        {"standard_index", index}});
+    }
+    out["kernel_bank"] = bank;
+    out["preprocess_rates"] = r.preprocess_rates;
+    model["levels"] = json::array();
+    for (const auto& s : r.stages)
+        if (model["levels"].empty() || model["levels"].back()["level"] != s.level)
+            model["levels"].push_back({{"level", s.level},
+                                       {"mesh", json::array({s.mesh_x, s.mesh_y})},
+                                       {"resolution", json::array({s.resolution_x, s.resolution_y})},
+                                       {"rays", s.rays},
+                                       {"kernels", json::array()}});
+    for (const auto& s : r.stages) model["levels"][std::size_t(s.level)]["kernels"].push_back(s.kernel_support);
+    model["rays"] = r.rays;
+    return std::move(r.surface);
+}
+
 int run(const Args& a) {
     const json case_patch = parse_json_option(a.case_patch, "--case-patch");
     const json method_patch = parse_json_option(a.patch, "--patch");
@@ -118,12 +206,6 @@ int run(const Args& a) {
             run_scene.light.rays = std::max<std::int64_t>(1, std::llround(double(run_scene.light.rays) * a.rays_scale));
         else
             run_scene.light.rays_per_cell *= a.rays_scale;
-    }
-    if (a.engine == "design") {
-        // What `freeform design` does (plan_design, design/pipeline.hpp): the final level gets
-        // at least optimise.min_rays_per_mesh_cell rays per mesh cell, so that a design cannot
-        // fit its rays' noise. The baselines keep the case's rays (a full trace per evaluation).
-        run_scene.light.rays_per_cell = fitting_rays_per_cell(run_scene, nx, ny);
     }
     const auto [case_nx, case_ny] = final_mesh_of(judge);
 
@@ -156,88 +238,8 @@ int run(const Args& a) {
     int trace_levels = 1;
     const auto start = Clock::now();
 
-    if (a.engine == "design" && a.start_only) {
-        // The start alone, made as design() makes it (same seed, same threads, same scene),
-        // then judged like every other run below. Its time is the whole solve, fit and the
-        // start's own exact-tracer check (which design() also pays before annealing).
-        DesignStart s = make_design_start(run_scene, io::make_initial_heightmap(run_scene, nx, ny), run_target, a.seed,
-                                          threads);
-        const double seconds = seconds_since(start);
-        s.report.plan = "--start-only: no annealing";
-        out["seconds"] = seconds;
-        out["iterations"] = 0;
-        out["evaluations"] = 0;
-        out["iterations_per_second"] = 0.0;
-        out["start"] = io::start_report_json(s.report);
-        // One trace point: the start's error and energy as the library measured them (run
-        // seed, final receiver resolution; the objective is not computed there: 0).
-        if (s.report.error >= 0) trace.push_back({seconds, 0, 0, s.report.error, s.report.energy, 0.0});
-        model["start"] = to_string(s.report.used);
-        result_surface = std::move(s.surface);
-    } else if (a.engine == "design") {
-        DesignOptions o = run_scene.optimise;
-        o.seed = a.seed;
-        o.time_budget = a.time_budget;
-        o.threads = a.threads;
-        o.progress_every = a.progress_every;
-        if (a.kernel_supports > 0) {
-            Scene planned = run_scene;
-            planned.optimise = o;
-            o.levels = plan_levels(planned);
-            for (auto& l : o.levels) l.kernel_supports = {a.kernel_supports};
-        }
-        DesignResult r = design(run_scene, io::make_initial_heightmap(run_scene, nx, ny), run_target, o,
-                                [](const DesignProgress&) { return false; });
-        const double seconds = seconds_since(start);
-        trace = trace_of(r);
-        std::int64_t proposals = 0;
-        int levels = 0;
-        for (const auto& s : r.stages) proposals += s.proposals_evaluated, levels = std::max(levels, s.level + 1);
-        trace_levels = std::max(1, levels);
-        out["seconds"] = seconds;
-        out["iterations"] = r.iterations;
-        out["evaluations"] = r.iterations;
-        out["proposals_evaluated"] = proposals;
-        out["accepted"] = r.accepted;
-        out["iterations_per_second"] = seconds > 0 ? double(r.iterations) / seconds : 0.0;
-        out["stages"] = io::stage_reports_json(r.stages);
-        out["start"] = io::start_report_json(r.start);
-        out["bandit"] = to_string(o.bandit);
-        out["evaluation"] = to_string(o.evaluation);
-        out["kernel_shapes"] = to_string(o.kernel_shapes);
-        out["max_iterations"] = o.max_iterations;
-        out["stop_reasons"] = json::array();
-        for (const auto& s : r.stages) out["stop_reasons"].push_back(to_string(s.stop_reason));
-        out["bandit_weights"] = r.bandit_weights;
-        json bank = json::array();
-        for (const auto& k : r.kernel_bank) {
-            // Which shape of the standard bank this is (the history bandit's pre-process keeps
-            // a subset), so that weights can be compared across runs and cases.
-            int index = -1;
-            const auto standard = default_kernel_bank(std::max(3, k.support | 1));
-            for (std::size_t j = 0; j < standard.size(); ++j)
-                if (standard[j].sigma_x == k.sigma_x && standard[j].sigma_y == k.sigma_y && standard[j].rho == k.rho)
-                    index = int(j);
-            bank.push_back({{"sigma_x", k.sigma_x},
-                            {"sigma_y", k.sigma_y},
-                            {"rho", k.rho},
-                            {"support", k.support},
-                            {"standard_index", index}});
-        }
-        out["kernel_bank"] = bank;
-        out["preprocess_rates"] = r.preprocess_rates;
-        model["levels"] = json::array();
-        for (const auto& s : r.stages)
-            if (model["levels"].empty() || model["levels"].back()["level"] != s.level)
-                model["levels"].push_back({{"level", s.level},
-                                           {"mesh", json::array({s.mesh_x, s.mesh_y})},
-                                           {"resolution", json::array({s.resolution_x, s.resolution_y})},
-                                           {"rays", s.rays},
-                                           {"kernels", json::array()}});
-        for (const auto& s : r.stages) model["levels"][std::size_t(s.level)]["kernels"].push_back(s.kernel_support);
-        model["rays"] = r.rays;
-        model["start"] = to_string(r.start.used);
-        result_surface = std::move(r.surface);
+    if (a.engine == "design") {
+        result_surface = run_design_engine(a, run_scene, run_target, out, model, trace, trace_levels);
     } else {
         if (a.start_only) throw InputError("--start-only: only with --engine design");
         const auto [cx, cy] = control_grid_for(a.control, nx, ny);
