@@ -421,7 +421,7 @@ void print_forms(const CompletedDesign& d, const json& m) {
 
 // The summary a design prints (always, --quiet or not): error_physical first, then the
 // diagnostics, the machining figures, the start and where the results are.
-void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out) {
+void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out, double writing_seconds) {
     const DesignResult& result = d.result;
     const double error = d.fitted.error, energy = d.fitted.totals.energy();
     const std::optional<double>& error_held_out = d.error_held_out;
@@ -430,11 +430,16 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 (long long)result.iterations, result.seconds, m["iterations_per_second"].get<double>(),
                 result.stopped_early ? " -- best result so far written" : "");
     // Where the time went: the budget bounds the design, its start included; the final
-    // traces and the export checks come after it.
+    // traces, the export checks and the writing of the files come after it.
     const double budget = d.scene.optimise.time_budget;
-    std::printf("  time: %.1f s designing%s, then %.1f s for the final traces and the export checks\n", result.seconds,
+    std::printf("  time: %.1f s designing%s, then %.1f s for the final traces and the export checks, %.1f s writing "
+                "the files\n",
+                result.seconds,
                 budget > 0 ? (" (time budget " + fixed(budget, 1) + " s, the start included)").c_str() : "",
-                d.finish_seconds);
+                d.finish_seconds, writing_seconds);
+    // A level the budget could not afford (design/designer.hpp, trace_affordable): say so.
+    if (const std::size_t at = result.start.plan.find(" not annealed: "); at != std::string::npos)
+        std::printf("  time budget: %s\n", result.start.plan.substr(result.start.plan.rfind("; ", at) + 2).c_str());
     print_forms(d, m);
     std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
     if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
@@ -598,11 +603,13 @@ void write_design(const DesignArgs& a, const CompletedDesign& d, const json& rep
     // half-written files (each file is written atomically, but the set should be whole).
     StatusLine& status = monitor.status();
     if (!monitor.quiet()) status.show("writing the results");
+    const auto writing = std::chrono::steady_clock::now();
     io::write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
         if (!monitor.quiet()) status.show(what);
     });
     status.finish();
-    print_design_summary(d, m, a.out);
+    print_design_summary(d, m, a.out,
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count());
 }
 
 // `freeform design`: everything is read and checked before the design starts.
