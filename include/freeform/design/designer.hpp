@@ -890,20 +890,16 @@ class Designer {
         receiver.height = final_level.resolution_y;
         Scene final_scene = scene_;
         final_scene.receiver = receiver;
-        const RaySet rays = generate_rays(scene_.light, surface_, receiver, options_.seed);
         const PathParams final_pp = make_path_params(final_scene);
-        // One plain trace: the problem's trace (its rays' cells indexed too) costs many
-        // times more under grazing light, and gives the same histogram.
-        Histogram h(receiver.width, receiver.height);
-        TraceTotals totals;
-        HeightfieldTracer(surface_, rays, final_pp).trace_all(exec::omp_t{threads_}, h, totals);
-        ImageState image(make_target(target_image_, receiver.width, receiver.height, target_total(rays, final_pp)));
-        image.reset(h);
-        result_.value = combine(image.sums(), image.target().total,
-                                Penalties::value(penalties_.full(surface_), surface_), weights_);
-        result_.irradiance = std::move(h);
-        result_.target = image.target();
-        result_.rays = rays.size();
+        // One plain trace of the design's own rays (the judge of held_out.hpp with the
+        // design's seed): the problem's trace, its rays' cells indexed too, costs many
+        // times more under grazing light and gives the same histogram.
+        HeldOutCheck fitted(surface_, scene_.light, receiver, final_pp, target_image_, weights_, penalties_,
+                            options_.seed, threads_);
+        result_.value = fitted(surface_);
+        result_.irradiance = fitted.histogram();
+        result_.target = fitted.target();
+        result_.rays = fitted.rays();
         if (options_.held_out_checks) {
             // ... and on the final level's held-out rays.
             HeldOutCheck check(surface_, scene_.light, receiver, final_pp, target_image_, weights_, penalties_,

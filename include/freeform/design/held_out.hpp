@@ -62,12 +62,15 @@ public:
     // surface's own: they do not depend on rays).
     ObjectiveValue operator()(const Heightmap& surface) {
         const HeightfieldTracer tracer(surface, rays_, params_);
-        Histogram h(image_.width(), image_.height());
+        histogram_ = Histogram(image_.width(), image_.height());
         TraceTotals totals;
-        tracer.trace_all(exec::omp_t{threads_}, h, totals);
-        image_.reset(h);
+        tracer.trace_all(exec::omp_t{threads_}, histogram_, totals);
+        image_.reset(histogram_);
         return combine(image_.sums(), image_.target().total, Penalties::value(penalties_->full(surface), surface), weights_);
     }
+    // What the last call traced, and the target it was judged against.
+    const Histogram& histogram() const { return histogram_; }
+    const Target& target() const { return image_.target(); }
 
 private:
     std::uint64_t seed_;
@@ -77,6 +80,7 @@ private:
     ObjectiveWeights weights_;
     const Penalties* penalties_;
     int threads_;
+    Histogram histogram_;
 };
 
 // The best state seen by held-out checks during one stage.

@@ -178,8 +178,7 @@ inline std::size_t sort_merge_cells(CellCrossing* cells, std::size_t n) {
     // A path's cells come in the order it crosses them: a path running towards lower rows
     // comes in descending, the insertion sort's worst case (under grazing light, some 45
     // cells a ray, the sort was a tenth of a full trace's profile). Reversed first, it is
-    // nearly sorted.
-    // Equal cells are merged by min and max, so their order does not change the result.
+    // nearly sorted. Equal cells are merged by min and max: their order does not matter.
     if (cells[0].cell > cells[n - 1].cell) std::reverse(cells, cells + n);
     for (std::size_t k = 1; k < n; ++k) {
         const CellCrossing x = cells[k];
@@ -333,7 +332,6 @@ struct TraceChange : TracePart {
     }
 };
 
-// Maintained per-ray records and ray/cell index for one height field, ray set and scene.
 // Every `stride`-th ray of a set traced as IncrementalTrace::rebuild's scalar path traces
 // it, its cells collected: how many rays, in how many seconds, crossing how many cells.
 // A design with a time budget asks this before it builds a trace it may not afford
@@ -362,6 +360,7 @@ inline RebuildSample sample_rebuild(const Heightmap& surface, const RaySet& rays
     return s;
 }
 
+// Maintained per-ray records and ray/cell index for one height field, ray set and scene.
 class IncrementalTrace {
 public:
     IncrementalTrace(const Heightmap& surface, const RaySet& rays, const PathParams& params)
