@@ -80,7 +80,8 @@ TEST_CASE_TEMPLATE("a learning bandit favours the best arm of a stationary probl
 }
 
 TEST_CASE("make_bandit builds every named bandit, and each learns through AnyBandit") {
-    for (auto name : bandit_kind_names) {
+    for (const auto& n : bandit_kind_names) {
+        const std::string_view name = n.name;
         AnyBandit b = make_bandit(name, 5, 32);
         CHECK(b.arms() == 5);
         CHECK(b.sync_interval() == 32);

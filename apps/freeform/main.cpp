@@ -14,6 +14,7 @@
 // all input is read and checked before any output file is written.
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <cctype>
 #include <charconv>
@@ -119,10 +120,9 @@ MeshMaterial parse_mesh_material(const std::string& s) {
 }
 
 TracerChoice parse_tracer(const std::string& s) {
-    if (s.empty() || s == "auto") return TracerChoice::automatic;
-    if (s == "heightfield") return TracerChoice::heightfield;
-    if (s == "embree") return TracerChoice::embree;
-    throw InputError("--tracer: must be one of auto, heightfield, embree; got '" + s + "'");
+    if (s.empty()) return TracerChoice::automatic;
+    if (const std::optional<TracerChoice> t = enum_value(s, tracer_names)) return *t;
+    throw InputError("--tracer: must be one of " + enum_list(tracer_names) + "; got '" + s + "'");
 }
 
 // A byte count with an optional unit (K/M/G/T with or without "iB"/"B": powers of 1024),
@@ -325,8 +325,8 @@ int run_render(const RenderArgs& a) {
     status.finish();
     const json m = render_metrics(a, mesh, mesh_material, r);
     write_render_outputs(a.out, m, r.histogram, r.cells);
-    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(), tracer_name(r.decision.tracer),
-                r.decision.reason.c_str());
+    std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(),
+                std::string(to_string(r.decision.tracer)).c_str(), r.decision.reason.c_str());
     if (r.cells)
         std::printf("  error_physical %.4f, energy %.4f: cell means, nearest deposit, %.0f rays per cell\n",
                     r.cells->error, r.cells->totals.energy(), r.cells->rays_per_cell);
@@ -670,13 +670,12 @@ struct ExportArgs {
 };
 
 enum class ExportFile { step, sag, stl, obj };
+constexpr std::array<EnumName<ExportFile>, 4> export_file_names{
+    {{"step", ExportFile::step}, {"sag", ExportFile::sag}, {"stl", ExportFile::stl}, {"obj", ExportFile::obj}}};
 
 ExportFile parse_export_format(const std::string& f) {
-    if (f == "step") return ExportFile::step;
-    if (f == "sag") return ExportFile::sag;
-    if (f == "stl") return ExportFile::stl;
-    if (f == "obj") return ExportFile::obj;
-    throw InputError("--format: expected step, sag, stl or obj, got '" + f + "'");
+    if (const std::optional<ExportFile> e = enum_value(f, export_file_names)) return *e;
+    throw InputError("--format: expected " + enum_list(export_file_names, "", " or ") + ", got '" + f + "'");
 }
 
 // The exported facets of `hm` (stl/obj), written, and judged when `target` is given.

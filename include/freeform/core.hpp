@@ -1,8 +1,10 @@
 #pragma once
 // Umbrella header of the core module (docs/architecture.md §3): vectors and views, fixed
 // point and histograms, counter-based random numbers, execution policies and the task
-// pool, the deposit rule, frames and surface materials, errors and resource limits.
+// pool, the deposit rule, frames and surface materials, errors and resource limits, the
+// names of enumerations.
 #include "core/deposit.hpp"
+#include "core/enum_names.hpp"
 #include "core/error.hpp"
 #include "core/exec.hpp"
 #include "core/fixed_point.hpp"

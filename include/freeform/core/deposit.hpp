@@ -1,6 +1,9 @@
 #pragma once
 // How the receiver records a ray's weight (docs/scene.md, receiver.deposit; docs/measures.md).
+#include <array>
 #include <cstdint>
+
+#include "enum_names.hpp"
 
 namespace freeform {
 
@@ -13,5 +16,9 @@ enum class Deposit : std::uint8_t {
                     // (half at the edge). Continuous in the landing point like bilinear, and it sees
                     // every scale the receiver resolves (the default)
 };
+
+// Their names in scene files (receiver.deposit).
+inline constexpr std::array<EnumName<Deposit>, 3> deposit_names{
+    {{"fine_bilinear", Deposit::fine_bilinear}, {"bilinear", Deposit::bilinear}, {"nearest", Deposit::nearest}}};
 
 }  // namespace freeform

@@ -7,8 +7,11 @@
 // the blank the face is milled into is that much wider) are glass too: light that meets
 // them is reflected inside or refracted out, as in the solid.
 // Fresnel partial reflection is neglected (all light that can be transmitted is).
+#include <array>
 #include <cstdint>
 #include <variant>
+
+#include "enum_names.hpp"
 
 namespace freeform {
 
@@ -33,6 +36,10 @@ inline bool is_lens(const Material& m) { return std::holds_alternative<Lens>(m);
 // every crossing, total internal reflection followed (not lost), Fresnel neglected as
 // for the lens. Refractive solids must not overlap or nest.
 enum class MeshKind : std::uint8_t { absorber, mirror, refractive };
+// The kinds a scene file names (meshes[].material); a refractive solid is written as an
+// object with its index ({"refractive": ior}).
+inline constexpr std::array<EnumName<MeshKind>, 2> mesh_material_names{
+    {{"absorber", MeshKind::absorber}, {"mirror", MeshKind::mirror}}};
 
 struct MeshMaterial {
     MeshKind kind = MeshKind::absorber;

@@ -139,7 +139,7 @@ inline nlohmann::json render_metrics_json(const RenderResult& r, bool mesh,
     using json = nlohmann::json;
     const Scene& scene = r.scene;
     json m;
-    m["tracer"] = tracer_name(r.decision.tracer);
+    m["tracer"] = to_string(r.decision.tracer);
     m["tracer_reason"] = r.decision.reason;
     m["threads"] = r.threads;
     m["seed"] = scene.optimise.seed;

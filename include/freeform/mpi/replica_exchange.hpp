@@ -90,6 +90,7 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -97,8 +98,10 @@
 #include <exception>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <type_traits>
 #include <utility>
@@ -115,12 +118,14 @@ namespace freeform::mpi {
 // that merge their surfaces (domains; see "Domains" at the top).
 enum class ReplicaMode { tempering, domains };
 
-inline const char* to_string(ReplicaMode m) { return m == ReplicaMode::domains ? "domains" : "tempering"; }
+inline constexpr std::array<EnumName<ReplicaMode>, 2> replica_mode_names{
+    {{"tempering", ReplicaMode::tempering}, {"domains", ReplicaMode::domains}}};
+
+inline std::string_view to_string(ReplicaMode m) { return enum_name(m, replica_mode_names); }
 
 inline ReplicaMode parse_replica_mode(const std::string& s, const std::string& what) {
-    if (s == "tempering") return ReplicaMode::tempering;
-    if (s == "domains") return ReplicaMode::domains;
-    throw InputError(what + ": expected \"tempering\" or \"domains\", got \"" + s + "\"");
+    if (const std::optional<ReplicaMode> m = enum_value(s, replica_mode_names)) return *m;
+    throw InputError(what + ": expected " + enum_list(replica_mode_names, "\"", " or ") + ", got \"" + s + "\"");
 }
 
 // The default is domains: at equal cores and wall time it beat one rank on every case

@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -511,11 +512,10 @@ inline AnyBandit make_bandit(BanditKind kind, int arms, int sync_interval = 64) 
 // ... from its name (bandit_kind_names, scene/scene.hpp); `key` names the option in errors.
 inline AnyBandit make_bandit(std::string_view name, int arms, int sync_interval = 64,
                              std::string_view key = "bandit") {
-    for (std::size_t k = 0; k < bandit_kind_names.size(); ++k)
-        if (bandit_kind_names[k] == name) return make_bandit(BanditKind(k), arms, sync_interval);
-    std::string known;
-    for (auto n : bandit_kind_names) known += (known.empty() ? "" : ", ") + std::string(n);
-    throw InputError(std::string(key) + ": unknown bandit '" + std::string(name) + "' (known: " + known + ")");
+    if (const std::optional<BanditKind> kind = enum_value(name, bandit_kind_names))
+        return make_bandit(*kind, arms, sync_interval);
+    throw InputError(std::string(key) + ": unknown bandit '" + std::string(name) + "' (known: " +
+                     enum_list(bandit_kind_names) + ")");
 }
 
 static_assert(check_bandit<UniformBandit>());

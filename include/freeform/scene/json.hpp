@@ -28,6 +28,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "../core/enum_names.hpp"
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../core/frame.hpp"
@@ -195,36 +196,13 @@ inline std::filesystem::path file_path(const json& v, const std::string& path, c
     return (base / p).lexically_normal();
 }
 
-template <class E>
-struct EnumName {
-    std::string_view name;
-    E value;
-};
-
+// An enumeration's value from its name in `names` (the enum's own table, core/enum_names.hpp).
 template <class E, std::size_t N>
 E enumeration(const json& v, const std::string& path, const std::array<EnumName<E>, N>& names) {
-    std::string allowed;
-    for (const auto& n : names) allowed += (allowed.empty() ? "\"" : ", \"") + std::string(n.name) + "\"";
+    const std::string allowed = enum_list(names, "\"");
     if (!v.is_string()) throw error(path, "expected one of " + allowed + ", got " + describe(v));
-    const std::string s = v.get<std::string>();
-    for (const auto& n : names)
-        if (n.name == s) return n.value;
+    if (const std::optional<E> e = enum_value(v.get<std::string>(), names)) return *e;
     throw error(path, "must be one of " + allowed + ", got " + describe(v));
-}
-
-// An enum whose names are listed in its values' order (scene/scene.hpp).
-template <class E, std::size_t N>
-E enumeration(const json& v, const std::string& path, const std::array<std::string_view, N>& names) {
-    std::array<EnumName<E>, N> table;
-    for (std::size_t k = 0; k < N; ++k) table[k] = {names[k], E(k)};
-    return enumeration(v, path, table);
-}
-
-template <class E, std::size_t N>
-std::string_view enum_name(E value, const std::array<EnumName<E>, N>& names) {
-    for (const auto& n : names)
-        if (n.value == value) return n.name;
-    return names[0].name;
 }
 
 inline const json& array_of(const json& v, const std::string& path, std::size_t n, const char* what) {
@@ -318,18 +296,6 @@ inline Frame read_frame(const Object& o, Vec3d center, Vec3d normal, Vec3d up, c
 
 inline json vec_json(Vec3d v) { return json::array({v.x, v.y, v.z}); }
 inline json vec_json(Vec2d v) { return json::array({v.x, v.y}); }
-
-// ---- enumerations -----------------------------------------------------------------
-
-inline constexpr std::array<EnumName<Aperture>, 2> aperture_names{
-    {{"rect", Aperture::rect}, {"ellipse", Aperture::ellipse}}};
-inline constexpr std::array<EnumName<Deposit>, 3> deposit_names{
-    {{"fine_bilinear", Deposit::fine_bilinear}, {"bilinear", Deposit::bilinear}, {"nearest", Deposit::nearest}}};
-inline constexpr std::array<EnumName<TracerChoice>, 3> tracer_names{
-    {{"auto", TracerChoice::automatic}, {"heightfield", TracerChoice::heightfield}, {"embree", TracerChoice::embree}}};
-inline constexpr std::array<EnumName<MeshKind>, 2> mesh_material_names{
-    {{"absorber", MeshKind::absorber}, {"mirror", MeshKind::mirror}}};
-inline constexpr std::array<EnumName<int>, 3> light_type_names{{{"collimated", 0}, {"point", 1}, {"disk", 2}}};
 
 // ---- blocks -----------------------------------------------------------------------
 
@@ -515,20 +481,19 @@ inline DiskLight read_disk_light(const Object& o, const SurfaceSpec& surface) {
 
 inline Light read_light(const json& j, const SurfaceSpec& surface) {
     const Object o(j, "light");
-    const int type = enumeration(o.require("type"), o.at("type"), light_type_names);
+    const std::size_t type = enumeration(o.require("type"), o.at("type"), light_type_names);
     static constexpr std::array<std::string_view, 3> common{"type", "rays_per_cell", "rays"};
     static constexpr std::array<std::array<std::string_view, 3>, 3> own{
         {{"direction", "angular_radius", ""}, {"position", "axis", "profile"}, {"center", "normal", "radius"}}};
     std::vector<std::string_view> allowed(common.begin(), common.end());
-    for (std::string_view k : own[std::size_t(type)])
+    for (std::string_view k : own[type])
         if (!k.empty()) allowed.push_back(k);
     o.only(allowed, [&](const std::string& key) -> std::optional<std::string> {
         if (key.empty()) return std::nullopt;  // "" pads the key table, it is no key
-        for (int t = 0; t < 3; ++t)
-            if (t != type &&
-                std::find(own[std::size_t(t)].begin(), own[std::size_t(t)].end(), key) != own[std::size_t(t)].end())
-                return "not a key of a " + std::string(light_type_names[std::size_t(type)].name) +
-                       " light (it belongs to a " + std::string(light_type_names[std::size_t(t)].name) + " light)";
+        for (std::size_t t = 0; t < own.size(); ++t)
+            if (t != type && std::find(own[t].begin(), own[t].end(), key) != own[t].end())
+                return "not a key of a " + std::string(enum_name(type, light_type_names)) + " light (it belongs to a " +
+                       std::string(enum_name(t, light_type_names)) + " light)";
         return std::nullopt;
     });
 
@@ -589,9 +554,9 @@ inline MeshMaterial read_mesh_material(const json& v, const std::string& p) {
         return MeshMaterial::refractive(ior);
     }
     if (v.is_string())
-        for (const auto& n : mesh_material_names)
-            if (n.name == v.get<std::string>()) return MeshMaterial{n.value, 1.49};
-    throw error(p, "expected \"absorber\", \"mirror\" or {\"refractive\": ior}, got " + describe(v));
+        if (const std::optional<MeshKind> kind = enum_value(v.get<std::string>(), mesh_material_names))
+            return MeshMaterial{*kind, 1.49};
+    throw error(p, "expected " + enum_list(mesh_material_names, "\"") + " or {\"refractive\": ior}, got " + describe(v));
 }
 
 inline std::vector<MeshSpec> read_meshes(const json& j, const std::filesystem::path& base) {
@@ -734,9 +699,10 @@ inline void read_export_formats(const json& v, const std::string& p, OptimiseSpe
     o.export_formats.clear();
     if (v.is_string() && v.get<std::string>() == "auto") return;
     if (!v.is_array() || v.empty())
-        throw error(p, "expected \"auto\" or a non-empty list of \"mesh\", \"step\", \"sag\", got " + describe(v));
+        throw error(p, "expected \"auto\" or a non-empty list of " + enum_list(export_format_names, "\"") + ", got " +
+                           describe(v));
     for (std::size_t k = 0; k < v.size(); ++k) {
-        const auto f = enumeration<ExportFormat>(v[k], p + "[" + std::to_string(k) + "]", export_format_names);
+        const ExportFormat f = enumeration(v[k], p + "[" + std::to_string(k) + "]", export_format_names);
         if (std::find(o.export_formats.begin(), o.export_formats.end(), f) != o.export_formats.end())
             throw error(p, "\"" + std::string(to_string(f)) + "\" is listed twice");
         o.export_formats.push_back(f);
@@ -752,14 +718,14 @@ inline void write_export_formats(const OptimiseSpec& o, std::string_view n, json
     j[std::string(n)] = list;
 }
 
-// An enum field M whose names, in its values' order, are Names (scene/scene.hpp).
+// An enum field M whose names are Names (its table, scene/scene.hpp).
 template <auto M, const auto& Names>
 void read_enum_key(const json& v, const std::string& p, OptimiseSpec& o) {
-    o.*M = enumeration<std::remove_cvref_t<decltype(o.*M)>>(v, p, Names);
+    o.*M = enumeration(v, p, Names);
 }
 template <auto M, const auto& Names>
 void write_enum_key(const OptimiseSpec& o, std::string_view n, json& j) {
-    j[std::string(n)] = Names[std::size_t(o.*M)];
+    j[std::string(n)] = enum_name(o.*M, Names);
 }
 
 inline std::span<const OptimiseKey> optimise_keys() {

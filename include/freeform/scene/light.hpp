@@ -1,11 +1,15 @@
 #pragma once
 // Light sources. Each emits a deterministic, stratified set of rays aimed at the surface
 // aperture; rays that could not reach the aperture are never generated.
+#include <array>
+#include <cstddef>
 #include <cstdint>
+#include <string_view>
 #include <utility>
 #include <variant>
 #include <vector>
 
+#include "../core/enum_names.hpp"
 #include "../core/math.hpp"
 
 namespace freeform {
@@ -46,13 +50,12 @@ struct Light {
     std::int64_t rays = 0;
 };
 
-inline const char* light_type_name(const LightShape& s) {
-    switch (s.index()) {
-        case 0: return "collimated";
-        case 1: return "point";
-        default: return "disk";
-    }
-}
+// Their names in scene files (light.type), keyed by the index in LightShape.
+inline constexpr std::array<EnumName<std::size_t>, 3> light_type_names{
+    {{"collimated", 0}, {"point", 1}, {"disk", 2}}};
+static_assert(std::variant_size_v<LightShape> == light_type_names.size());
+
+inline std::string_view light_type_name(const LightShape& s) { return enum_name(s.index(), light_type_names); }
 
 // Relative intensity of a profile at `deg` degrees off axis.
 inline double profile_intensity(const std::vector<std::pair<double, double>>& profile, double deg) {

@@ -12,6 +12,7 @@
 #include <variant>
 #include <vector>
 
+#include "../core/enum_names.hpp"
 #include "../core/material.hpp"
 #include "../surface/heightmap.hpp"
 #include "light.hpp"
@@ -63,6 +64,10 @@ struct MeshSpec {
 };
 
 enum class TracerChoice { automatic, heightfield, embree };
+// Their names in scene files (trace.tracer), the command line (--tracer) and reports.
+inline constexpr std::array<EnumName<TracerChoice>, 3> tracer_names{
+    {{"auto", TracerChoice::automatic}, {"heightfield", TracerChoice::heightfield}, {"embree", TracerChoice::embree}}};
+inline std::string_view to_string(TracerChoice t) { return enum_name(t, tracer_names); }
 
 struct TraceSpec {
     TracerChoice tracer = TracerChoice::automatic;
@@ -89,20 +94,26 @@ enum class KernelShapes { bank, isotropic };
 // The bandit that picks a kernel shape (propose/bandit.hpp), in order of sophistication.
 enum class BanditKind { uniform, history, ucb1, discounted_ucb };
 
-// Their names in scene files and reports, in the enums' order: the one mapping between
-// the strings and the values (scene/json.hpp reads and writes with it).
-inline constexpr std::array<std::string_view, 2> evaluation_names{"incremental", "full"};
-inline constexpr std::array<std::string_view, 2> kernel_shape_names{"bank", "isotropic"};
-inline constexpr std::array<std::string_view, 4> bandit_kind_names{"uniform", "history", "ucb1", "discounted-ucb"};
+// Their names in scene files and reports: the one mapping between the strings and the
+// values (scene/json.hpp reads and writes with it).
+inline constexpr std::array<EnumName<EvaluationMode>, 2> evaluation_names{
+    {{"incremental", EvaluationMode::incremental}, {"full", EvaluationMode::full}}};
+inline constexpr std::array<EnumName<KernelShapes>, 2> kernel_shape_names{
+    {{"bank", KernelShapes::bank}, {"isotropic", KernelShapes::isotropic}}};
+inline constexpr std::array<EnumName<BanditKind>, 4> bandit_kind_names{{{"uniform", BanditKind::uniform},
+                                                                        {"history", BanditKind::history},
+                                                                        {"ucb1", BanditKind::ucb1},
+                                                                        {"discounted-ucb", BanditKind::discounted_ucb}}};
 // The forms a design's surface is exported in (docs/export.md): the milled facets
 // (surface.obj/.stl), the smooth B-spline part (surface.step, builds with Open CASCADE)
 // and the grid sag table (surface.dat).
 enum class ExportFormat { mesh, step, sag };
-inline constexpr std::array<std::string_view, 3> export_format_names{"mesh", "step", "sag"};
-inline std::string_view to_string(ExportFormat f) { return export_format_names[std::size_t(f)]; }
-inline std::string_view to_string(EvaluationMode e) { return evaluation_names[std::size_t(e)]; }
-inline std::string_view to_string(KernelShapes k) { return kernel_shape_names[std::size_t(k)]; }
-inline std::string_view to_string(BanditKind b) { return bandit_kind_names[std::size_t(b)]; }
+inline constexpr std::array<EnumName<ExportFormat>, 3> export_format_names{
+    {{"mesh", ExportFormat::mesh}, {"step", ExportFormat::step}, {"sag", ExportFormat::sag}}};
+inline std::string_view to_string(ExportFormat f) { return enum_name(f, export_format_names); }
+inline std::string_view to_string(EvaluationMode e) { return enum_name(e, evaluation_names); }
+inline std::string_view to_string(KernelShapes k) { return enum_name(k, kernel_shape_names); }
+inline std::string_view to_string(BanditKind b) { return enum_name(b, bandit_kind_names); }
 
 // Optimiser settings (the scene's "optimise" block; docs/scene.md lists each key).
 // Zero / empty fields mean "derive a default from the case".

@@ -9,11 +9,13 @@
 // (i, j)–(i+1, j+1). Vertex normals come from central differences with the physical
 // grid spacing (one-sided at the border), in the surface frame.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "../core/enum_names.hpp"
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../core/view.hpp"
@@ -22,6 +24,8 @@
 namespace freeform {
 
 enum class Aperture { rect, ellipse };
+inline constexpr std::array<EnumName<Aperture>, 2> aperture_names{
+    {{"rect", Aperture::rect}, {"ellipse", Aperture::ellipse}}};
 
 // An inclusive rectangle of vertex indices.
 struct Patch {

@@ -12,14 +12,6 @@ struct TracerDecision {
     std::string reason;
 };
 
-inline const char* tracer_name(TracerChoice c) {
-    switch (c) {
-        case TracerChoice::heightfield: return "heightfield";
-        case TracerChoice::embree: return "embree";
-        default: return "auto";
-    }
-}
-
 // `imported_mesh`: the designed surface is replaced by a triangle mesh (render --mesh).
 // `requested`: automatic, or a user override that is refused when it cannot be exact.
 inline TracerDecision choose_tracer(const Scene& scene, bool imported_mesh, TracerChoice requested,
