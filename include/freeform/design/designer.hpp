@@ -176,11 +176,24 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene) {
     return levels;
 }
 
-// The final mesh: the scene's, or the designer's plan's last level when it is "auto".
+// The final mesh: the scene's, or the last of `levels` (plan_levels(scene)) when it is
+// "auto".
+inline std::pair<int, int> final_mesh(const Scene& scene, const std::vector<LevelPlan>& levels) {
+    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
+    return {levels.back().mesh_x, levels.back().mesh_y};
+}
+
 inline std::pair<int, int> final_mesh(const Scene& scene) {
     if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    const auto levels = plan_levels(scene);
-    return {levels.back().mesh_x, levels.back().mesh_y};
+    return final_mesh(scene, plan_levels(scene));
+}
+
+// The scene's receiver at a level's resolution (the same plane: frame and size).
+inline Receiver level_receiver(const Receiver& receiver, const LevelPlan& level) {
+    Receiver r = receiver;
+    r.width = level.resolution_x;
+    r.height = level.resolution_y;
+    return r;
 }
 
 // The rays per receiver cell a design fits its final level to: the light's own, raised
@@ -494,10 +507,12 @@ class Designer {
     using Problem = BasicSurfaceProblem<Backend>;
     using Hooks = StageHooks<Problem, std::remove_reference_t<Callback>, Replicas>;
 
+    // `planned`: plan_levels of the scene with these options, when the caller has them
+    // (plan_design); null: planned here.
     Designer(const Scene& scene, const ImageD& target_image, const DesignOptions& options, Callback& callback,
-             const Penalties& penalties, Replicas& replicas)
+             const Penalties& penalties, Replicas& replicas, const std::vector<LevelPlan>* planned = nullptr)
         : scene_(scene), target_image_(target_image), options_(options), callback_(callback), penalties_(penalties),
-          replicas_(replicas),
+          replicas_(replicas), planned_(planned),
           // An iteration cap, or no time budget, makes a run reproducible bit for bit:
           // nothing may then depend on measured time (see calibrate()). Otherwise the run
           // is timed: its calibrations are cut short by slow moves and its stages' budgets
@@ -518,11 +533,16 @@ class Designer {
     }
 
   private:
-    // The levels, the start, and the levels the start leaves to run.
-    void schedule(Heightmap initial) {
+    // The levels plan_levels gives the scene with these options.
+    std::vector<LevelPlan> plan_here() const {
         Scene planned = scene_;
         planned.optimise = options_;
-        levels_ = options_.levels.empty() ? plan_levels(planned) : options_.levels;
+        return plan_levels(planned);
+    }
+
+    // The levels, the start, and the levels the start leaves to run.
+    void schedule(Heightmap initial) {
+        levels_ = !options_.levels.empty() ? options_.levels : planned_ ? *planned_ : plan_here();
         threads_ = thread_count(exec::omp_t{options_.threads});
         // Where to start and which of the planned levels that start still needs, computed
         // once: with replicas, one computes it and hands it to the others (replicas.hpp).
@@ -557,18 +577,14 @@ class Designer {
         L.index = li;
         L.plan = &levels_[li];
         surface_ = refine_preserving_normals(surface_, L.plan->mesh_x, L.plan->mesh_y);
-        L.receiver = scene_.receiver;
-        L.receiver.width = L.plan->resolution_x;
-        L.receiver.height = L.plan->resolution_y;
+        L.receiver = level_receiver(scene_.receiver, *L.plan);
         // Coarse levels only shape the light roughly: fewer rays per cell make their moves
         // cheaper without changing what they can see. The last level uses the light's own.
         L.light = scene_.light;
         if (li + 1 < levels_.size() && options_.coarse_rays_per_cell > 0 && L.light.rays == 0)
             L.light.rays_per_cell = std::min(L.light.rays_per_cell, options_.coarse_rays_per_cell);
         L.rays = generate_rays(L.light, surface_, L.receiver, options_.seed);
-        Scene level_scene = scene_;
-        level_scene.receiver = L.receiver;
-        L.params = make_path_params(level_scene);
+        L.params = make_path_params(scene_, L.receiver);
         L.unit = amplitude_unit(scene_, L.receiver, surface_);
         if (options_.held_out_checks)
             L.held_out.emplace(surface_, L.light, L.receiver, L.params, target_image_, weights_, penalties_,
@@ -885,12 +901,8 @@ class Designer {
     void evaluate_on_final_mesh() {
         const LevelPlan& final_level = levels_.back();
         surface_ = refine_preserving_normals(surface_, final_level.mesh_x, final_level.mesh_y);
-        Receiver receiver = scene_.receiver;
-        receiver.width = final_level.resolution_x;
-        receiver.height = final_level.resolution_y;
-        Scene final_scene = scene_;
-        final_scene.receiver = receiver;
-        const PathParams final_pp = make_path_params(final_scene);
+        const Receiver receiver = level_receiver(scene_.receiver, final_level);
+        const PathParams final_pp = make_path_params(scene_, receiver);
         // One plain trace of the design's own rays (the judge of held_out.hpp with the
         // design's seed): the problem's trace, its rays' cells indexed too, costs many
         // times more under grazing light and gives the same histogram.
@@ -915,6 +927,7 @@ class Designer {
     std::remove_reference_t<Callback>& callback_;
     const Penalties& penalties_;
     Replicas& replicas_;
+    const std::vector<LevelPlan>* planned_;
     DesignClock clock_;
     bool timed_;
     ObjectiveWeights weights_;
@@ -932,8 +945,9 @@ class Designer {
 template <class Backend, class Callback, class Replicas>
 DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
                          const DesignOptions& options, Callback&& callback, const Penalties& penalties,
-                         Replicas& replicas) {
-    Designer<Backend, Callback, Replicas> designer(scene, target_image, options, callback, penalties, replicas);
+                         Replicas& replicas, const std::vector<LevelPlan>* planned) {
+    Designer<Backend, Callback, Replicas> designer(scene, target_image, options, callback, penalties, replicas,
+                                                   planned);
     return designer.run(std::move(initial));
 }
 
@@ -947,15 +961,20 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 // when a caller adds terms of its own.
 //
 // `replicas` makes this design one replica of several (replicas.hpp); SingleReplica, the
-// default, is the plain design.
+// default, is the plain design. `planned`, when given, is plan_levels(scene) with
+// `options` as its optimise block (PlannedDesign::levels): the levels are then not
+// planned again; options.levels, when set, still replaces them.
 template <class Callback, ReplicaCoordinator Replicas>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
-                    Callback&& callback, const Penalties& penalties, Replicas& replicas) {
+                    Callback&& callback, const Penalties& penalties, Replicas& replicas,
+                    const std::vector<LevelPlan>* planned = nullptr) {
     if (options.evaluation == EvaluationMode::full)
         return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
-                                                              std::forward<Callback>(callback), penalties, replicas);
+                                                              std::forward<Callback>(callback), penalties, replicas,
+                                                              planned);
     return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
-                                                          std::forward<Callback>(callback), penalties, replicas);
+                                                          std::forward<Callback>(callback), penalties, replicas,
+                                                          planned);
 }
 
 template <class Callback>

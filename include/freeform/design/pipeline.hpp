@@ -23,6 +23,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "../core/error.hpp"
 #include "../core/exec.hpp"
@@ -57,11 +58,12 @@ struct DesignCallbacks {
     std::function<void(const std::string&)> phase;
 };
 
-// A scene made ready to design: its rays raised for the final mesh
-// (optimise.min_rays_per_mesh_cell) and the surface the design starts from.
+// A scene made ready to design: its levels, planned once, its rays raised for the final
+// mesh (optimise.min_rays_per_mesh_cell) and the surface the design starts from.
 struct PlannedDesign {
     Scene scene;  // the effective scene: what metrics.json records
     Heightmap initial;
+    std::vector<LevelPlan> levels;  // plan_levels(scene): the final mesh and the designer's schedule
 };
 
 // Throws InputError, naming the key, for a scene that cannot be designed.
@@ -75,8 +77,8 @@ inline void check_designable(const Scene& scene) {
 // (a surface read from a file); without it a scene whose start is a PFM file is refused.
 inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {}) {
     check_designable(scene);
-    PlannedDesign p{scene, Heightmap{}};
-    const auto [nx, ny] = final_mesh(scene);
+    PlannedDesign p{scene, Heightmap{}, plan_levels(scene)};
+    const auto [nx, ny] = final_mesh(scene, p.levels);
     // Enough rays for the final mesh: the design, its checks and its final render use them.
     p.scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
     if (initial) {
@@ -271,7 +273,7 @@ DesignResult anneal(PlannedDesign& plan, const ImageD& target, const DesignSetup
     return freeform::design(plan.scene, std::move(plan.initial), target, options, progress,
                             setup.penalties ? *setup.penalties
                                             : default_penalties(options, plan.scene.surface.tool_radius),
-                            replicas);
+                            replicas, &plan.levels);
 }
 
 // The finish the setup asks for (finish_design).

@@ -35,15 +35,20 @@ inline MaterialView make_material_view(const Material& m, Vec2d size, double rim
     return v;
 }
 
-inline PathParams make_path_params(const Scene& scene) {
+// `receiver`: the scene's receiver plane, at its own resolution or at another one (a
+// design level's, design/designer.hpp): its frame and size must be the scene's (the lens
+// rim depends on them).
+inline PathParams make_path_params(const Scene& scene, const Receiver& receiver) {
     PathParams p;
     p.material = make_material_view(scene.surface.material, scene.surface.size, lens_rim(scene));
-    p.receiver = make_receiver_view(scene.receiver, scene.surface.frame);
+    p.receiver = make_receiver_view(receiver, scene.surface.frame);
     p.phong_alpha = float(scene.surface.phong_alpha);
     p.max_depth = scene.trace.max_depth;
     p.fresnel = scene.trace.fresnel;
     return p;
 }
+
+inline PathParams make_path_params(const Scene& scene) { return make_path_params(scene, scene.receiver); }
 
 // The total a target is scaled to (N of docs/measures.md): the weight of the rays that
 // reach the surface. With Fresnel losses on a lens, the part of it that a flat lens of the
