@@ -5,6 +5,7 @@
 // (How long designs take is measured in benchmarks/, never asserted here.)
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <string>
 
 #include <freeform/design/designer.hpp>
@@ -59,4 +60,40 @@ TEST_CASE("a budget the start used up: no level is annealed, and the result desc
     CHECK(r.value.total == fresh.value().total);
     CHECK(r.value.error == fresh.value().error);
     CHECK(r.held_out.total >= 0);  // judged on the final level's held-out rays as well
+}
+
+TEST_CASE("a stage that stops paying hands on its time: StageGainWatch") {
+    using design_detail::StageGainWatch;
+    // Off by default: never stalls, whatever it is fed.
+    StageGainWatch off;
+    for (int k = 0; k < 100; ++k) CHECK_FALSE(off.stalled(0.1 * k, 1.0));
+
+    // A window of 1 s and a floor of 1 %, from t = 2 s.
+    StageGainWatch w(1.0, 0.01, 2.0);
+    double error = 0.05;
+    double t = 2.0;
+    // 2 % a second (0.2 % every 0.1 s): never stalls, also not within the first window.
+    for (; t < 6.0; t += 0.1) {
+        CHECK_FALSE(w.stalled(t, error));
+        error *= 0.998;
+    }
+    // Then no gain but noise (a rise is not a loss: the best is kept): the watch stalls
+    // once the last window's gain falls under 1 % (from t = 6.5: five steps of 0.2 %),
+    // and at the latest a window after the gain stopped.
+    const double flat = error;
+    bool stalled = false;
+    double stalled_at = 0;
+    for (int k = 0; !stalled && k < 40; ++k, t += 0.1) {
+        const double e = k % 2 ? flat * 1.02 : flat * (1 - 0.0005 * (k / 2 % 10 == 0));
+        stalled = w.stalled(t, e);
+        stalled_at = t;
+    }
+    CHECK(stalled);
+    CHECK(w.gave_up);
+    CHECK(stalled_at > 6.45);
+    CHECK(stalled_at < 7.05);
+
+    // A slow but sufficient gain (1.5 % a window) does not stall.
+    StageGainWatch slow(1.0, 0.01, 0.0);
+    for (int k = 0; k < 100; ++k) CHECK_FALSE(slow.stalled(0.1 * k, 0.05 * std::pow(0.985, 0.1 * k)));
 }

@@ -153,7 +153,9 @@ struct AnnealOptions {
     bool restore_best = true;
 };
 
-enum class StopReason { max_iterations, time_budget, target_energy, stall, min_temperature, callback };
+// no_gain is the designer's (design/designer.hpp, StageGainWatch): a stage that had
+// stopped paying, ended so that the next one gets its time. The annealer never returns it.
+enum class StopReason { max_iterations, time_budget, target_energy, stall, min_temperature, callback, no_gain };
 
 inline const char* to_string(StopReason reason) {
     switch (reason) {
@@ -163,6 +165,7 @@ inline const char* to_string(StopReason reason) {
         case StopReason::stall: return "stall";
         case StopReason::min_temperature: return "min_temperature";
         case StopReason::callback: return "callback";
+        case StopReason::no_gain: return "no_gain";
     }
     return "unknown";
 }

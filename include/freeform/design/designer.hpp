@@ -60,7 +60,7 @@ struct StageReport {
     double error_start = 0, error_end = 0, energy_end = 0, objective_end = 0;
     std::int64_t rays = 0;
     std::vector<double> bandit_weights;
-    StopReason stop_reason = StopReason::max_iterations;
+    StopReason stop_reason = StopReason::max_iterations;  // no_gain: StageGainWatch
     // Held-out checks (held_out.hpp; all -1 / 0 when optimise.held_out_checks is off).
     double held_out_start = -1;  // error of the stage's start on the held-out rays
     double held_out_end = -1;    // ... of the state the stage ends with
@@ -386,6 +386,44 @@ namespace design_detail {
 // level (Designer::trace_affordable).
 inline constexpr double rebuild_seconds_per_crossing = 100e-9;
 
+// A timed stage that is not the design's last ends when it has stopped paying: when its
+// best fitted error fell by less than stage_gain_floor (relative) over the last
+// stage_gain_window of the time budget. Its time passes to the next stage. From a
+// transport start the large kernels of a level's first stage mostly re-shape what the
+// start already has: on the lens example's two photographs and on the camera case that
+// stage won under 1 % in a third of the budget while the small kernels after it went on
+// winning (docs/performance.md, "Stages that stop paying"). Not for the design's last
+// stage, with replicas (their stops are collective) or with an iteration cap.
+inline constexpr double stage_gain_window = 0.1;
+inline constexpr double stage_gain_floor = 0.01;
+
+// The watch over one stage's gain: fed the fitted error at every progress report,
+// stalled() once the best error of `window` seconds ago beats today's best by less than
+// `floor` of itself. A default-constructed watch never stalls.
+struct StageGainWatch {
+    double window = 0, floor = 0, begin = 0;
+    std::vector<std::pair<double, double>> best_by_time = {};  // (seconds, best error so far)
+    bool gave_up = false;
+
+    StageGainWatch() = default;
+    StageGainWatch(double window_seconds, double floor_fraction, double begin_seconds)
+        : window(window_seconds), floor(floor_fraction), begin(begin_seconds) {}
+
+    bool stalled(double now, double error) {
+        if (!(window > 0)) return false;
+        const double best = best_by_time.empty() ? error : std::min(error, best_by_time.back().second);
+        best_by_time.push_back({now, best});
+        if (now - begin < window) return false;
+        // The best error one window ago: the last record at or before now - window.
+        const auto it = std::upper_bound(best_by_time.begin(), best_by_time.end(), now - window,
+                                         [](double t, const auto& p) { return t < p.first; });
+        if (it == best_by_time.begin()) return false;
+        const double then = std::prev(it)->second;
+        gave_up = then - best < floor * then;
+        return gave_up;
+    }
+};
+
 inline std::string one_decimal(double x) {
     char b[32];
     std::snprintf(b, sizeof b, "%.1f", x);
@@ -423,6 +461,7 @@ struct StageHooks {
     std::int64_t merged_at = 0;
     std::int64_t merges = 0;
     std::int64_t merge_every = 0;
+    StageGainWatch gain = {};  // off unless set (stage_hooks)
     // Held-out checks at the first sync point past each interval: sync points are fixed
     // iterations, so the checks do not change the run's course. Replicas that share a
     // surface check only merged states (the same on every replica), at merges.
@@ -476,7 +515,7 @@ struct StageHooks {
         info.time_left = budget > 0 ? std::max(0.0, budget - now) : 0.0;
         if ((*user)(info)) stopped = true;
         // With replicas, a stop is taken at the next exchange point, by all.
-        return replicas ? false : stopped;
+        return replicas ? false : stopped || gain.stalled(now, v.error);
     }
 };
 
@@ -752,6 +791,9 @@ class Designer {
             hooks.held_best = &held_best;
             hooks.next_check = held_out->interval();
         }
+        const bool last = L.index + 1 == levels_.size() && si + 1 == L.stages;
+        if (timed_ && !last && !replicas_.active())
+            hooks.gain = StageGainWatch(stage_gain_window * options_.time_budget, stage_gain_floor, clock_());
         if (replicas_.active()) {
             hooks.replicas = &replicas_;
             hooks.stage_deadline = options_.time_budget > 0 ? clock_() + stage_time : 0;
@@ -836,6 +878,7 @@ class Designer {
             report.held_out_end = held_best.value.error;
             report.held_out_checks = held_best.checks;
         }
+        if (hooks.gain.gave_up && !hooks.stopped) report.stop_reason = StopReason::no_gain;
         end_stage(problem, ar, report, stage_start, hooks.stopped);
         if (last || stop_)
             keep_result(problem, ps, report, L, held_out, held_best);
@@ -877,7 +920,7 @@ class Designer {
         report.energy_end = problem.value().energy;
         report.objective_end = problem.value().total;
         report.bandit_weights = options_.single_vertex ? std::vector<double>{} : problem.bandit().weights();
-        report.stop_reason = ar.reason;
+        if (report.stop_reason != StopReason::no_gain) report.stop_reason = ar.reason;
         result_.stages.push_back(report);
         // With replicas, every replica goes on to the next stage, or none does.
         result_.stopped_early = replicas_.any(stopped);
