@@ -41,6 +41,7 @@ TEST_CASE("a budget the start used up: no level is annealed, and the result desc
     CHECK(r.start.levels_planned == 2);
     CHECK(r.start.levels_used == 0);
     CHECK(r.start.plan.find("the 9 x 9 level and the 1 after it not annealed") != std::string::npos);
+    CHECK(r.start.left_out.rfind("the 9 x 9 level and the 1 after it not annealed", 0) == 0);
     REQUIRE(r.surface.nx() == 17);
     REQUIRE(r.surface.ny() == 17);
 

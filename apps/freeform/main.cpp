@@ -438,8 +438,7 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 budget > 0 ? (" (time budget " + fixed(budget, 1) + " s, the start included)").c_str() : "",
                 d.finish_seconds, writing_seconds);
     // A level the budget could not afford (design/designer.hpp, trace_affordable): say so.
-    if (const std::size_t at = result.start.plan.find(" not annealed: "); at != std::string::npos)
-        std::printf("  time budget: %s\n", result.start.plan.substr(result.start.plan.rfind("; ", at) + 2).c_str());
+    if (!result.start.left_out.empty()) std::printf("  time budget: %s\n", result.start.left_out.c_str());
     print_forms(d, m);
     std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
     if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);

@@ -183,10 +183,7 @@ inline std::pair<int, int> final_mesh(const Scene& scene, const std::vector<Leve
     return {levels.back().mesh_x, levels.back().mesh_y};
 }
 
-inline std::pair<int, int> final_mesh(const Scene& scene) {
-    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    return final_mesh(scene, plan_levels(scene));
-}
+inline std::pair<int, int> final_mesh(const Scene& scene) { return final_mesh(scene, plan_levels(scene)); }
 
 // The scene's receiver at a level's resolution (the same plane: frame and size).
 inline Receiver level_receiver(const Receiver& receiver, const LevelPlan& level) {
@@ -419,8 +416,7 @@ struct StageGainWatch {
                                          [](double t, const auto& p) { return t < p.first; });
         if (it == best_by_time.begin()) return false;
         const double then = std::prev(it)->second;
-        gave_up = then - best < floor * then;
-        return gave_up;
+        return gave_up = then - best < floor * then;
     }
 };
 
@@ -652,10 +648,11 @@ class Designer {
         if (2 * build <= left) return true;
         result_.start.levels_used = int(L.index);
         const std::size_t after = levels_.size() - L.index - 1;
-        result_.start.plan += "; the " + std::to_string(L.plan->mesh_x) + " x " + std::to_string(L.plan->mesh_y) +
-                              " level" + (after > 0 ? " and the " + std::to_string(after) + " after it" : "") +
-                              " not annealed: building its trace would take about " + one_decimal(build) +
-                              " s of the " + one_decimal(std::max(left, 0.0)) + " s left";
+        result_.start.left_out = "the " + std::to_string(L.plan->mesh_x) + " x " + std::to_string(L.plan->mesh_y) +
+                                 " level" + (after > 0 ? " and the " + std::to_string(after) + " after it" : "") +
+                                 " not annealed: building its trace would take about " + one_decimal(build) +
+                                 " s of the " + one_decimal(std::max(left, 0.0)) + " s left";
+        result_.start.plan += "; " + result_.start.left_out;
         stop_ = true;
         evaluate_on_final_mesh();
         return false;
@@ -791,8 +788,7 @@ class Designer {
             hooks.held_best = &held_best;
             hooks.next_check = held_out->interval();
         }
-        const bool last = L.index + 1 == levels_.size() && si + 1 == L.stages;
-        if (timed_ && !last && !replicas_.active())
+        if (timed_ && !design_last(L, si) && !replicas_.active())
             hooks.gain = StageGainWatch(stage_gain_window * options_.time_budget, stage_gain_floor, clock_());
         if (replicas_.active()) {
             hooks.replicas = &replicas_;
@@ -820,11 +816,16 @@ class Designer {
         return report;
     }
 
+    // Whether stage si of level L is the design's last.
+    bool design_last(const LevelSetup& L, std::size_t si) const {
+        return L.index + 1 == levels_.size() && si + 1 == L.stages;
+    }
+
     void run_stage(LevelSetup& L, std::size_t si) {
         const std::size_t li = L.index;
         const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports[si];
         const std::uint64_t stage_seed = hash_combine(options_.seed, li * 16 + si);
-        const bool last = li + 1 == levels_.size() && si + 1 == L.stages;  // the design's last stage
+        const bool last = design_last(L, si);
         if (wants_preprocess(li, si)) preprocess(L, support, stage_seed);
         ProposalSettings ps = proposals_for(moves_, support, kept_arms_);
         const int arms = std::max<int>(1, int(ps.bank.size()));
@@ -878,7 +879,7 @@ class Designer {
             report.held_out_end = held_best.value.error;
             report.held_out_checks = held_best.checks;
         }
-        if (hooks.gain.gave_up && !hooks.stopped) report.stop_reason = StopReason::no_gain;
+        report.stop_reason = hooks.gain.gave_up && !hooks.stopped ? StopReason::no_gain : ar.reason;
         end_stage(problem, ar, report, stage_start, hooks.stopped);
         if (last || stop_)
             keep_result(problem, ps, report, L, held_out, held_best);
@@ -920,7 +921,6 @@ class Designer {
         report.energy_end = problem.value().energy;
         report.objective_end = problem.value().total;
         report.bandit_weights = options_.single_vertex ? std::vector<double>{} : problem.bandit().weights();
-        if (report.stop_reason != StopReason::no_gain) report.stop_reason = ar.reason;
         result_.stages.push_back(report);
         // With replicas, every replica goes on to the next stage, or none does.
         result_.stopped_early = replicas_.any(stopped);

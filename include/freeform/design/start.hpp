@@ -35,6 +35,8 @@ struct StartReport {
     double seconds = 0;              // solve, fit and evaluation
     int levels_planned = 0, levels_used = 0;
     std::string plan;                // the schedule's decision, in words
+    std::string left_out;            // a level the time budget could not afford, in words
+                                     // (also at the end of `plan`); empty when none
 };
 
 struct SurfaceEvaluation {
