@@ -1,5 +1,5 @@
 // The smooth exported forms do what the designed surface does (docs/export.md): the
-// fitted B-spline (the surface of surface.step and surface.dat), tessellated and traced
+// fitted B-spline (the surface of surface.step), tessellated and traced
 // with its own normals interpolated, throws the light of the simulated Phong surface, far
 // closer than flat facets of the same grid do.
 #include <doctest/doctest.h>

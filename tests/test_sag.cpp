@@ -1,14 +1,16 @@
-// The smooth exported form: the B-spline fitted to the designed surface
-// (surface/bspline.hpp) and the grid sag table written from it (io/sag.hpp). The table is
-// checked with a bicubic evaluator written here from the format's definition (16
-// conditions per cell solved for the 16 coefficients of a bicubic polynomial), not with
-// the reader's Hermite formula.
+// The smooth exported forms: the B-spline fitted to the designed surface for the STEP
+// part (surface/bspline.hpp), and the grid sag table (io/sag.hpp), which carries the
+// height map's own vertices and vertex-normal slopes. The table is checked with a bicubic
+// evaluator written here from the format's definition (16 conditions per cell solved for
+// the 16 coefficients of a bicubic polynomial), not with the reader's Hermite formula.
 #include <doctest/doctest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <algorithm>
+#include <array>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -17,6 +19,7 @@
 
 #include <freeform/io/sag.hpp>
 #include <freeform/surface/bspline.hpp>
+#include <freeform/surface/export.hpp>
 
 #include "support.hpp"
 
@@ -102,6 +105,40 @@ std::array<double, 3> raw_eval(const RawSag& r, double x, double y) {
     return {z, zs / r.dx, zt / r.dy};
 }
 
+
+// How far the table's bicubic surface (raw_eval) lies from the designed Phong patches
+// between the vertices: at 3 × 3 points inside every cell (the cells of the outermost
+// ring, whose border vertices carry one-sided normals, or all the others), heights
+// compared at the patch point's own (x, y) and slopes against the patch's own normal.
+struct Departure {
+    double max_dz = 0, p90_dz = 0, max_slope = 0, p90_slope = 0;  // metres, radians
+};
+
+Departure departure_from_patches(const RawSag& r, const Heightmap& hm, double alpha, bool border_ring) {
+    std::vector<double> dz, ds;
+    for (int cj = 0; cj + 1 < hm.ny(); ++cj)
+        for (int ci = 0; ci + 1 < hm.nx(); ++ci) {
+            const bool ring = ci == 0 || cj == 0 || ci + 2 == hm.nx() || cj + 2 == hm.ny();
+            if (ring != border_ring) continue;
+            for (int m = 1; m <= 3; ++m)
+                for (int n = 1; n <= 3; ++n) {
+                    // Off the diagonal too: a = b lies on the edge between the two patches.
+                    const double a = 0.25 * n + 0.05, b = 0.25 * m - 0.03;
+                    const PhongVertex p = phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
+                    const auto t = raw_eval(r, p.position.x * 1e3, p.position.y * 1e3);
+                    dz.push_back(std::abs(t[0] * 1e-3 - p.position.z));
+                    const double sx = -p.normal.x / p.normal.z, sy = -p.normal.y / p.normal.z;
+                    ds.push_back(std::max(std::abs(t[1] - sx), std::abs(t[2] - sy)));
+                }
+        }
+    const auto p90 = [](std::vector<double> v) {
+        const auto k = std::ptrdiff_t(0.9 * double(v.size() - 1));
+        std::nth_element(v.begin(), v.begin() + k, v.end());
+        return v[std::size_t(k)];
+    };
+    return {*std::max_element(dz.begin(), dz.end()), p90(dz), *std::max_element(ds.begin(), ds.end()), p90(ds)};
+}
+
 }  // namespace
 
 TEST_CASE("the fitted spline follows the designed surface, closer as the grid is refined") {
@@ -147,59 +184,111 @@ TEST_CASE("a cubic is fitted exactly: the spline space holds it") {
     CHECK(worst < 1e-6);
 }
 
-TEST_CASE("the grid sag table is the spline: an independent bicubic evaluator reproduces it") {
+TEST_CASE("the grid sag table carries the designed vertices and their normals") {
     const Heightmap hm = smooth_surface(41, 31);
-    const BSplineSurface s = fit_bspline(hm, 1.0, 4);
     const std::filesystem::path f = "sag_test.dat";
-    io::write_grid_sag(f, s);
+    io::write_grid_sag(f, hm);
     const RawSag raw = parse_raw(f);
     REQUIRE(raw.nx == 41);
     REQUIRE(raw.ny == 31);
     CHECK(raw.unit == 0);  // millimetres
     CHECK(raw.dx == doctest::Approx(1.0));  // 40 mm over 40 cells
     CHECK(raw.dy == doctest::Approx(1.0));
+    CHECK(raw.xdec == 0);
+    CHECK(raw.ydec == 0);
     REQUIRE(raw.rows.size() == std::size_t(41 * 31));
-    // First point: the upper left corner (x = -20 mm, y = +15 mm).
-    CHECK(raw.rows[0][0] == doctest::Approx(s.eval(-0.02, 0.015).z * 1e3).epsilon(1e-12));
-    CHECK(raw.rows[1][0] == doctest::Approx(s.eval(-0.019, 0.015).z * 1e3).epsilon(1e-12));
-    CHECK(raw.rows[41][0] == doctest::Approx(s.eval(-0.02, 0.014).z * 1e3).epsilon(1e-12));
+    // Every vertex, the file's rows from the top (+y, j = ny − 1) down: the height map's
+    // height (float, written in 13 digits) and the slopes of its vertex normal.
+    double vz = 0, vslope = 0, twist = 0;
+    int nodata = 0;
+    for (int row = 0; row < raw.ny; ++row)
+        for (int i = 0; i < raw.nx; ++i) {
+            const int j = raw.ny - 1 - row;
+            const auto& v = raw.rows[std::size_t(row) * std::size_t(raw.nx) + std::size_t(i)];
+            nodata += v[4] != 0;
+            const Vec3d n = Vec3d(hm.normals()[std::size_t(j) * std::size_t(hm.nx()) + std::size_t(i)]);
+            vz = std::max(vz, std::abs(v[0] * 1e-3 - double(hm(i, j))));
+            vslope = std::max({vslope, std::abs(v[1] + n.x / n.z), std::abs(v[2] + n.y / n.z)});
+            if (i == 0 || j == 0 || i + 1 == hm.nx() || j + 1 == hm.ny()) continue;
+            // Inside, the twist is the four-point cross difference of the heights (1/mm).
+            const double cross = (double(hm(i + 1, j + 1)) - hm(i - 1, j + 1) - hm(i + 1, j - 1) + hm(i - 1, j - 1)) /
+                                 (4 * hm.du() * hm.dv());
+            twist = std::max(twist, std::abs(v[3] * 1e3 - cross));
+        }
+    MESSAGE("grid sag at the vertices: heights within " << vz * 1e6 << " um, slopes within " << vslope * 1e3
+                                                          << " mrad of the height map's");
+    CHECK(nodata == 0);
+    CHECK(vz < 1e-7);       // goal: 0.1 um (it is the float heights' rounding)
+    CHECK(vslope < 1e-5);   // goal: 0.01 mrad
+    CHECK(twist < 1e-3);    // 1/m: the heights' float rounding over 4 du dv = 4 mm²
+    // The library's reader gives them back at the vertices' (u, v), rows in the right order.
+    const io::GridSag g = io::read_grid_sag(f);
+    double rz = 0, rn = 0;
+    for (int j = 0; j < hm.ny(); ++j)
+        for (int i = 0; i < hm.nx(); ++i) {
+            const SplineSample q = g.eval(hm.u_of(i), hm.v_of(j));
+            rz = std::max(rz, std::abs(q.z - double(hm(i, j))));
+            const Vec3d n = normalize(Vec3d(hm.normals()[std::size_t(j) * std::size_t(hm.nx()) + std::size_t(i)]));
+            rn = std::max(rn, std::acos(std::min(1.0, dot(q.normal(), n))));
+        }
+    CHECK(rz < 1e-7);
+    CHECK(rn < 1e-5);
+    // The reader's Hermite formula and the independent evaluator agree between vertices.
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> ux(-0.02, 0.02), vy(-0.015, 0.015);
-    double dz = 0, dslope = 0;
-    for (int n = 0; n < 300; ++n) {
+    for (int n = 0; n < 200; ++n) {
         const double u = ux(rng), v = vy(rng);
         const auto t = raw_eval(raw, u * 1e3, v * 1e3);
-        const SplineSample q = s.eval(u, v);
-        dz = std::max(dz, std::abs(t[0] * 1e-3 - q.z));
-        dslope = std::max({dslope, std::abs(t[1] - q.z_u), std::abs(t[2] - q.z_v)});
+        const SplineSample q = g.eval(u, v);
+        CHECK(std::abs(t[0] * 1e-3 - q.z) < 1e-12);
+        CHECK(std::abs(t[1] - q.z_u) < 1e-9);
+        CHECK(std::abs(t[2] - q.z_v) < 1e-9);
     }
-    CHECK(dz < 1e-10);       // 0.1 nm: the table is the spline, to the digits written
-    CHECK(dslope < 1e-8);    // 0.01 µrad
-    // The library's reader and evaluator agree with it.
-    const io::GridSag g = io::read_grid_sag(f);
-    for (int n = 0; n < 100; ++n) {
-        const double u = ux(rng), v = vy(rng);
-        const SplineSample a = g.eval(u, v), b = s.eval(u, v);
-        CHECK(std::abs(a.z - b.z) < 1e-10);
-        CHECK(std::abs(a.z_u - b.z_u) < 1e-8);
-        CHECK(std::abs(a.z_v - b.z_v) < 1e-8);
-    }
-    // Against the designed surface's own vertices (heights, and the vertex normals the
-    // Phong patches are built from), away from the rim where one-sided differences make
-    // the normals: within half a micrometre and a milliradian (the fit's smoothing of the
-    // patches' kinks, see above).
-    double vz = 0, vslope = 0;
-    for (int j = 1; j + 1 < hm.ny(); ++j)
-        for (int i = 1; i + 1 < hm.nx(); ++i) {
-            const SplineSample q = g.eval(hm.u_of(i), hm.v_of(j));
-            vz = std::max(vz, std::abs(q.z - double(hm(i, j))));
-            const Vec3d n = normalize(Vec3d(hm.normals()[std::size_t(j) * hm.nx() + i]));
-            vslope = std::max(vslope, std::acos(std::min(1.0, dot(q.normal(), n))));
-        }
-    MESSAGE("grid sag at the vertices: heights within " << vz * 1e6 << " um, normals within " << vslope * 1e3
-                                                          << " mrad");
-    CHECK(vz < 5e-7);
-    CHECK(vslope < 1e-3);
+}
+
+TEST_CASE("between the vertices the grid sag's bicubic surface follows the designed Phong patches") {
+    const Heightmap hm = smooth_surface(41, 31);
+    const double alpha = 0.5;  // the scenes' default phong_alpha
+    const std::filesystem::path f = "sag_between.dat";
+    io::write_grid_sag(f, hm);
+    const RawSag raw = parse_raw(f);
+    REQUIRE(raw.rows.size() == std::size_t(41 * 31));
+    const Departure d = departure_from_patches(raw, hm, alpha, false);
+    const Departure ring = departure_from_patches(raw, hm, alpha, true);
+    MESSAGE("grid sag between the vertices vs the Phong patches (alpha 0.5, 1 mm cells): inside, heights max "
+            << d.max_dz * 1e9 << " nm, p90 " << d.p90_dz * 1e9 << " nm; slopes max " << d.max_slope * 1e3
+            << " mrad, p90 " << d.p90_slope * 1e3 << " mrad. Outermost ring of cells: heights max "
+            << ring.max_dz * 1e9 << " nm, p90 " << ring.p90_dz * 1e9 << " nm; slopes max " << ring.max_slope * 1e3
+            << " mrad, p90 " << ring.p90_slope * 1e3 << " mrad");
+    // Inside, measured 5.0 nm / 0.020 mrad at most (3.3 nm / 0.015 mrad p90): a cubic and
+    // the quadratic patches built from the same corner data, and the patches' kinks
+    // across edges. The bounds are twice that, and tight enough to catch a wrong
+    // derivative (below).
+    const double bound_dz = 1e-8, bound_slope = 4e-5;  // 10 nm, 0.04 mrad
+    CHECK(d.max_dz < bound_dz);
+    CHECK(d.max_slope < bound_slope);
+    // The outermost ring depends on the border normals' stencil: 3.4 nm / 0.014 mrad with
+    // second-order one-sided slopes, 43 nm / 0.21 mrad with two-point ones (the slope half
+    // a cell inwards, which a cubic and a Phong patch bend differently).
+    CHECK(ring.max_dz < 1e-7);
+    CHECK(ring.max_slope < 5e-4);
+    // The same table with its slope columns swapped, dz/dy of the wrong sign, the twist's
+    // sign flipped or the twist left out fails the inside bounds.
+    const auto mutated = [&](auto&& change) {
+        RawSag m = raw;
+        for (auto& row : m.rows) change(row);
+        const Departure e = departure_from_patches(m, hm, alpha, false);
+        MESSAGE("  mutated: heights max " << e.max_dz * 1e9 << " nm, slopes max " << e.max_slope * 1e3 << " mrad");
+        return e;
+    };
+    const Departure swapped = mutated([](std::array<double, 5>& r) { std::swap(r[1], r[2]); });
+    CHECK((swapped.max_dz > bound_dz || swapped.max_slope > bound_slope));
+    const Departure sign = mutated([](std::array<double, 5>& r) { r[2] = -r[2]; });
+    CHECK((sign.max_dz > bound_dz || sign.max_slope > bound_slope));
+    const Departure twist = mutated([](std::array<double, 5>& r) { r[3] = -r[3]; });
+    CHECK((twist.max_dz > bound_dz || twist.max_slope > bound_slope));
+    const Departure flat = mutated([](std::array<double, 5>& r) { r[3] = 0; });
+    CHECK((flat.max_dz > bound_dz || flat.max_slope > bound_slope));
 }
 
 TEST_CASE("grid sag reader: bad files are refused with the line") {

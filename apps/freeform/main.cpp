@@ -715,15 +715,24 @@ int run_export(const ExportArgs& a) {
     } else {
         const double alpha = scene.surface.phong_alpha;
         const Heightmap top = export_blank(scene, hm);  // a lens's rim too
-        const BSplineSurface spline = fit_bspline(top, alpha, spline_samples_per_cell);
-        const SplineFitReport fit = check_spline_fit(spline, top, alpha, spline_samples_per_cell);
-        const io::FormCheck fc =
-            io::write_and_check_form(kind == ExportFile::step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
-                                     hm, spline, target ? &*target : nullptr, a.threads);
-        std::printf("wrote %s: %.1f MB in %.1f s, valid: %s; a bicubic B-spline of %d x %d poles within %.2g um "
-                    "(max) of the designed surface, normals within %.3f mrad (90th percentile), %.2f mrad (max)\n",
-                    a.out.string().c_str(), double(fc.bytes) / 1e6, fc.write_seconds, fc.valid.c_str(), spline.nu,
-                    spline.nv, fit.max_height_error * 1e6, fit.p90_normal_error * 1e3, fit.max_normal_error * 1e3);
+        const bool step = kind == ExportFile::step;
+        // The sag table carries the height map's vertices; only STEP needs the spline.
+        const BSplineSurface spline = step ? fit_bspline(top, alpha, spline_samples_per_cell) : BSplineSurface{};
+        const io::FormCheck fc = io::write_and_check_form(step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
+                                                          hm, spline, target ? &*target : nullptr, a.threads);
+        std::printf("wrote %s: %.1f MB in %.1f s, valid: %s; ", a.out.string().c_str(), double(fc.bytes) / 1e6,
+                    fc.write_seconds, fc.valid.c_str());
+        if (step) {
+            const SplineFitReport fit = check_spline_fit(spline, top, alpha, spline_samples_per_cell);
+            std::printf("a bicubic B-spline of %d x %d poles within %.2g um (max) of the designed surface, normals "
+                        "within %.3f mrad (90th percentile), %.2f mrad (max)\n",
+                        spline.nu, spline.nv, fit.max_height_error * 1e6, fit.p90_normal_error * 1e3,
+                        fit.max_normal_error * 1e3);
+        } else {
+            std::printf("the %d x %d vertices of the height map with their normals' slopes (bicubic Hermite "
+                        "between them)\n",
+                        top.nx(), top.ny());
+        }
         if (fc.cells)
             std::printf("  error_physical %.4f: the file read back, tessellated (%lld triangles) and traced with its "
                         "normals, %.0f rays per cell\n",

@@ -125,8 +125,9 @@ struct ExportChecks {
     std::optional<double> energy_exported;
     std::optional<double> l1_to_design;     // between its irradiance and the design's
     std::optional<CellMeans> cells;         // converged cell means: error_physical
-    // The smooth form (surface.step, surface.dat): the B-spline fitted to the designed
-    // surface, and how closely it follows it (docs/export.md).
+    // The smooth form of surface.step: the B-spline fitted to the designed surface, and
+    // how closely it follows it (docs/export.md). surface.dat carries the height map's
+    // own vertices instead (io/sag.hpp).
     BSplineSurface spline;
     SplineFitReport spline_fit;
     // The designed surface itself (the Phong height field the design simulated), traced

@@ -1,11 +1,11 @@
 #pragma once
 // The smooth exported forms of a design, written and then judged from the files
-// themselves (docs/export.md): surface.step read back by Open CASCADE, surface.dat read
-// back by our grid sag reader, each tessellated and traced to converged cell means as
-// error_physical is (design/exported.hpp, smooth_geometry). What is judged is what the
-// file holds, not the spline it was written from. With freeform::step this header brings
-// in Open CASCADE's headers (io/step.hpp): the io umbrella leaves it out, include it
-// where forms are written.
+// themselves (docs/export.md): surface.step (the fitted B-spline) read back by Open
+// CASCADE, surface.dat (a Hermite table of the height map's vertices) read back by our
+// grid sag reader, each tessellated and traced to converged cell means as error_physical
+// is (design/exported.hpp, smooth_geometry). What is judged is what the file holds, not
+// what it was written from. With freeform::step this header brings in Open CASCADE's
+// headers (io/step.hpp): the io umbrella leaves it out, include it where forms are written.
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -50,17 +50,18 @@ void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const Image
 
 namespace forms_detail {
 
-// Writes the smooth form `format` of `spline` to `file`.
+// Writes the smooth form `format` to `file`: the grid sag from the exported top of the
+// height map `grid` itself (its vertices and vertex normals), STEP from `spline`.
 inline void write_form(ExportFormat format, const std::filesystem::path& file, const Scene& scene,
-                       const BSplineSurface& spline) {
-    if (format == ExportFormat::sag) return write_grid_sag(file, spline);
+                       const Heightmap& grid, const BSplineSurface& spline) {
+    if (format == ExportFormat::sag) return write_grid_sag(file, export_blank(scene, grid));
 #if defined(FREEFORM_WITH_OCCT)
     const auto* lens = std::get_if<Lens>(&scene.surface.material);
     const double back =
         lens ? -lens->thickness : *std::min_element(spline.z.begin(), spline.z.end()) - mirror_step_thickness;
     write_step(file, spline, StepSolid{back, scene.name.empty() ? "freeform surface" : scene.name});
 #else
-    (void)file, (void)scene, (void)spline;
+    (void)file, (void)scene, (void)grid, (void)spline;
     throw InputError("surface.step needs a build with Open CASCADE (libocct-*-dev; see README)");
 #endif
 }
@@ -87,7 +88,7 @@ inline void check_form(FormCheck& fc, const Scene& scene, const Heightmap& grid,
 }  // namespace forms_detail
 
 // Writes `format` (step or sag) of the design whose surface is `grid` and whose fitted
-// spline is `spline` to `file`, reads the file back, and judges it against `target`
+// spline is `spline` (used by STEP only: the sag table carries `grid`'s vertices) to `file`, reads the file back, and judges it against `target`
 // (when given and the build has Embree). Throws IoError when the file cannot be written
 // or read back, InputError for a format this build lacks or the mesh (written elsewhere).
 inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem::path& file, const Scene& scene,
@@ -102,7 +103,7 @@ inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
     };
     const auto t0 = std::chrono::steady_clock::now();
-    forms_detail::write_form(format, file, scene, spline);
+    forms_detail::write_form(format, file, scene, grid, spline);
     fc.write_seconds = since(t0);
     fc.bytes = std::filesystem::file_size(file);
     const auto t1 = std::chrono::steady_clock::now();

@@ -14,13 +14,16 @@
 // the top (+y) down. Between points the program interpolates bicubically from the four
 // numbers at each corner.
 //
-// We write the fitted B-spline (surface/bspline.hpp) at its knots, the design's grid
-// vertices: the spline is one bicubic polynomial per cell, and a bicubic polynomial is
-// fixed by z, z_x, z_y and z_xy at its four corners, so the program's interpolation gives
-// back the spline itself, the surface the STEP part carries. x, y, z are the surface
-// frame's u, v, w in millimetres (w towards the light); the grid is centred on the
-// frame's origin (decentres 0). Cells outside an elliptical aperture are written too:
-// the sag covers the rectangle.
+// We write the design itself at its grid vertices, not the B-spline of the STEP part:
+// z is the height map's vertex height, dz/dx and dz/dy the slopes of its own vertex
+// normals (Heightmap::normals(), the normals the Phong patches are built from; slope =
+// −n_x/n_z, −n_y/n_z), so the program's bicubic interpolation is a C¹
+// Hermite surface through the designed vertices with the designed normals there. Between
+// the vertices it departs from the Phong patches the design simulated by what a cubic
+// makes of the same corner data (docs/export.md gives the figures). x, y, z are the
+// surface frame's u, v, w in millimetres (w towards the light); the grid is centred on the
+// frame's origin (decentres 0). Cells outside an elliptical aperture are written too: the
+// sag covers the rectangle.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -30,7 +33,8 @@
 #include <vector>
 
 #include "../core/error.hpp"
-#include "../surface/bspline.hpp"
+#include "../surface/bspline.hpp"  // SplineSample: what eval returns
+#include "../surface/heightmap.hpp"
 #include "file.hpp"
 #include "mesh.hpp"
 
@@ -85,27 +89,76 @@ struct GridSag {
     }
 };
 
-// Writes `s` as an OpticStudio grid sag table at its knots (millimetres). Throws IoError
-// naming the file when it cannot be written.
-inline void write_grid_sag(const std::filesystem::path& file, const BSplineSurface& s) {
-    const int nx = s.nu - 2, ny = s.nv - 2;  // clamped cubic: poles = spans + 3 = points + 2
-    if (nx < 2 || ny < 2) throw InputError("grid sag: the spline has fewer than 2 x 2 grid points");
-    const double mm = 1000.0;
-    const double dx = (s.u_max() - s.u_min()) / (nx - 1), dy = (s.v_max() - s.v_min()) / (ny - 1);
-    std::string text;
-    text.reserve(std::size_t(nx) * std::size_t(ny) * 80 + 100);
-    char line[200];
-    std::snprintf(line, sizeof line, "%d %d %.17g %.17g 0 %.17g %.17g\n", nx, ny, dx * mm, dy * mm,
-                  0.5 * (s.u_min() + s.u_max()) * mm, 0.5 * (s.v_min() + s.v_max()) * mm);
-    text += line;
-    for (int j = ny - 1; j >= 0; --j)
+namespace sag_detail {
+
+// d/dt at point k of a line of values x(0..n−1) spaced h: the central difference, and at
+// the ends the second-order one-sided difference (−3 x0 + 4 x1 − x2) / 2h, the derivative
+// at the end point itself (the two-point difference x1 − x0 is the one half a step
+// inwards); a line of two points has its one chord.
+template <class At>
+double line_derivative(const At& x, int k, int n, double h) {
+    if (n < 3) return (x(1) - x(0)) / h;
+    if (k == 0) return (-3 * x(0) + 4 * x(1) - x(2)) / (2 * h);
+    if (k == n - 1) return (3 * x(n - 1) - 4 * x(n - 2) + x(n - 3)) / (2 * h);
+    return (x(k + 1) - x(k - 1)) / (2 * h);
+}
+
+}  // namespace sag_detail
+
+// The grid sag table of the height map `hm` (metres, j growing with v): per vertex its
+// height, the slopes of its vertex normal, and the twist d²z/dudv.
+//
+// The twist is the mean of d(z_u)/dv and d(z_v)/du, each a central difference of the
+// vertex slopes (second-order one-sided at the border, line_derivative). In the interior
+// both are the same four-point cross difference of the heights, (h(i+1,j+1) − h(i−1,j+1)
+// − h(i+1,j−1) + h(i−1,j−1)) / (4 du dv), exact for a quadratic; at the border the two
+// stencils differ and the mean favours neither axis. A zero twist (Ferguson's patches)
+// would flatten every cell's cross term: wrong on a saddle-like or tilted-paraboloid design.
+inline GridSag grid_sag_of(const Heightmap& hm) {
+    const int nx = hm.nx(), ny = hm.ny();
+    if (nx < 2 || ny < 2) throw InputError("grid sag: the height map has fewer than 2 x 2 vertices");
+    GridSag g;
+    g.nx = nx, g.ny = ny, g.dx = hm.du(), g.dy = hm.dv();
+    const std::size_t n = std::size_t(nx) * std::size_t(ny);
+    g.z.resize(n), g.z_x.resize(n), g.z_y.resize(n), g.z_xy.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        const Vec3d nv = Vec3d(hm.normals()[k]);
+        g.z[k] = double(hm(int(k % std::size_t(nx)), int(k / std::size_t(nx))));
+        g.z_x[k] = -nv.x / nv.z, g.z_y[k] = -nv.y / nv.z;
+    }
+    const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
+    for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
-            // The knots themselves: the spline's grid vertices.
-            const SplineSample q = s.eval(s.knots_u[std::size_t(i + 3)], s.knots_v[std::size_t(j + 3)]);
-            std::snprintf(line, sizeof line, "%.12e %.12e %.12e %.12e 0\n", q.z * mm, q.z_u, q.z_v, q.z_uv / mm);
+            const double sxy = sag_detail::line_derivative([&](int jj) { return g.z_x[at(i, jj)]; }, j, ny, g.dy);
+            const double syx = sag_detail::line_derivative([&](int ii) { return g.z_y[at(ii, j)]; }, i, nx, g.dx);
+            g.z_xy[at(i, j)] = 0.5 * (sxy + syx);
+        }
+    return g;
+}
+
+// Writes `g` as an OpticStudio grid sag table (millimetres, rows from the top down).
+// Throws IoError naming the file when it cannot be written.
+inline void write_grid_sag(const std::filesystem::path& file, const GridSag& g) {
+    const double mm = 1000.0;
+    std::string text;
+    text.reserve(std::size_t(g.nx) * std::size_t(g.ny) * 80 + 100);
+    char line[200];
+    std::snprintf(line, sizeof line, "%d %d %.17g %.17g 0 %.17g %.17g\n", g.nx, g.ny, g.dx * mm, g.dy * mm,
+                  g.x_dec * mm, g.y_dec * mm);
+    text += line;
+    for (int j = g.ny - 1; j >= 0; --j)  // the file starts at the top row (+y)
+        for (int i = 0; i < g.nx; ++i) {
+            const std::size_t k = std::size_t(j) * std::size_t(g.nx) + std::size_t(i);
+            std::snprintf(line, sizeof line, "%.12e %.12e %.12e %.12e 0\n", g.z[k] * mm, g.z_x[k], g.z_y[k],
+                          g.z_xy[k] / mm);
             text += line;
         }
     write_file_atomically(file, text);
+}
+
+// Writes the height map `hm` as a grid sag table (grid_sag_of): the design at its vertices.
+inline void write_grid_sag(const std::filesystem::path& file, const Heightmap& hm) {
+    write_grid_sag(file, grid_sag_of(hm));
 }
 
 // Reads a grid sag table (any unit flag; lengths converted to metres). Throws IoError for

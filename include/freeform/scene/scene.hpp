@@ -106,7 +106,7 @@ inline constexpr std::array<EnumName<BanditKind>, 4> bandit_kind_names{{{"unifor
                                                                         {"discounted-ucb", BanditKind::discounted_ucb}}};
 // The forms a design's surface is exported in (docs/export.md): the milled facets
 // (surface.obj/.stl), the smooth B-spline part (surface.step, builds with Open CASCADE)
-// and the grid sag table (surface.dat).
+// and the grid sag table of the height map's vertices (surface.dat).
 enum class ExportFormat { mesh, step, sag };
 inline constexpr std::array<EnumName<ExportFormat>, 3> export_format_names{
     {{"mesh", ExportFormat::mesh}, {"step", ExportFormat::step}, {"sag", ExportFormat::sag}}};

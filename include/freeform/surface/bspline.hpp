@@ -1,7 +1,7 @@
 #pragma once
-// The designed surface as one smooth B-spline: what the STEP part (io/step.hpp) and the
-// grid sag table (io/sag.hpp) carry, and what a mill or an optical design program reads
-// (docs/export.md).
+// The designed surface as one smooth B-spline: what the STEP part (io/step.hpp) carries
+// and a mill reads (docs/export.md). The grid sag table (io/sag.hpp) no longer carries
+// it: it holds the height map's own vertices and vertex normals.
 //
 // The tracers simulate the Phong-tessellated height field (surface/phong.hpp): curved
 // quadratic patches, continuous in position, with small kinks of the normal across cell
@@ -20,7 +20,9 @@
 //
 // Because the knots lie on the grid lines the spline is one bicubic polynomial per grid
 // cell, which a bicubic Hermite interpolation of z, z_u, z_v and z_uv at the cell's four
-// corners reproduces exactly: the grid sag table is the same surface as the STEP part.
+// corners reproduces exactly (a grid sag of the spline would be the STEP part; we write
+// the design's vertices there instead, which the spline's least squares miss by a
+// fraction of a micrometre).
 //
 // The fit is separable (samples on a tensor grid): with B_u, B_v the basis matrices of
 // the sample positions, the poles C solve (B_vᵀB_v) C (B_uᵀB_u) = B_vᵀ Z B_u, two small
