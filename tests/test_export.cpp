@@ -181,7 +181,7 @@ TEST_CASE("points on shared edges get the same position from either side, bit fo
     // The patches meet without cracks; their normals meet with a small kink (Phong
     // patches are continuous, not smooth, across edges), which the tracers simulate.
     const Heightmap hm = wavy(6, 5);
-    const double alpha = 0.75;
+    const double alpha = SurfaceSpec{}.phong_alpha;  // the default, 1/2
     double kink = 0;
     const auto angle = [](Vec3d a, Vec3d b) { return std::atan2(length(cross(a, b)), dot(a, b)); };
     for (int cj = 0; cj + 1 < hm.ny(); ++cj)

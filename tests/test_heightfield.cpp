@@ -252,7 +252,7 @@ TEST_CASE("Phong correction brings a coarse paraboloid's irradiance closer to a 
     const RaySet rays = generate_rays(s.light, coarse, s.receiver, 3);
     s.surface.phong_alpha = 0.0;
     const Traced flat = trace_scene(s, coarse, rays);
-    s.surface.phong_alpha = 0.75;
+    s.surface.phong_alpha = SurfaceSpec{}.phong_alpha;  // the default, 1/2
     const Traced phong = trace_scene(s, coarse, rays);
     const double e_flat = l1_distance(flat.histogram, ref.histogram) / double(ref.totals.emitted);
     const double e_phong = l1_distance(phong.histogram, ref.histogram) / double(ref.totals.emitted);

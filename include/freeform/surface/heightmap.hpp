@@ -7,7 +7,7 @@
 // files they are exchanged in, and are always inside [h_min, h_max]. Cell (i, j) spans
 // vertices i..i+1 × j..j+1 and is split into two triangles along the fixed diagonal
 // (i, j)–(i+1, j+1). Vertex normals come from central differences with the physical
-// grid spacing (one-sided at the border), in the surface frame.
+// grid spacing (second-order one-sided at the border), in the surface frame.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -117,8 +117,16 @@ public:
 
     Patch full_patch() const { return {0, 0, nx_ - 1, ny_ - 1}; }
 
-    // Vertices whose normals depend on heights in `p` (the central-difference stencil).
-    Patch normal_support(const Patch& p) const { return p.dilated(1).clipped(nx_, ny_); }
+    // Vertices whose normals depend on heights in `p`: the central-difference stencil, and
+    // at the border the one-sided stencil, which reaches two vertices inwards.
+    Patch normal_support(const Patch& p) const {
+        Patch s = p.dilated(1).clipped(nx_, ny_);
+        if (p.i0 <= 2) s.i0 = 0;
+        if (p.i1 >= nx_ - 3) s.i1 = nx_ - 1;
+        if (p.j0 <= 2) s.j0 = 0;
+        if (p.j1 >= ny_ - 3) s.j1 = ny_ - 1;
+        return s;
+    }
 
     // Recomputes the normals of the vertices in `p` (already including the stencil).
     void update_normals(const Patch& p) {
@@ -129,14 +137,27 @@ public:
     }
 
     // The normal at vertex (i, j) of a height field read through `h(i, j)`: central
-    // differences with the physical spacing, one-sided at the border. Shared by the
-    // height map and by overlays that preview a move, so both agree to the last bit.
+    // differences with the physical spacing; at the border the second-order one-sided
+    // difference (-3 h0 + 4 h1 - h2) / 2d, the slope at the border vertex itself. (The
+    // two-point difference h1 - h0 is the slope half a cell inwards; with it the Phong
+    // patch of a border cell bends its light through half the range its heights ask for,
+    // and no choice of heights can restore it: a converging lens lost a third of its
+    // outermost receiver row that way, docs/architecture.md §1.) Shared by the height map
+    // and by overlays that preview a move, so both agree to the last bit.
     template <class Heights>
     Vec3 vertex_normal(const Heights& h, int i, int j) const {
-        const int il = i > 0 ? i - 1 : 0, ir = i < nx_ - 1 ? i + 1 : nx_ - 1;
-        const int jl = j > 0 ? j - 1 : 0, jr = j < ny_ - 1 ? j + 1 : ny_ - 1;
-        const double dhdu = (double(h(ir, j)) - double(h(il, j))) / ((ir - il) * du());
-        const double dhdv = (double(h(i, jr)) - double(h(i, jl))) / ((jr - jl) * dv());
+        const auto slope = [](double lo, double mid, double hi, int at, int n, double d) {
+            if (at == 0) return (-3 * lo + 4 * mid - hi) / (2 * d);
+            if (at == n - 1) return (3 * hi - 4 * mid + lo) / (2 * d);
+            return (hi - lo) / (2 * d);
+        };
+        // Three heights along u and along v: the stencil, shifted inwards at the border
+        // (a grid of two vertices has one chord).
+        const int iu = std::clamp(i - 1, 0, std::max(nx_ - 3, 0)), jv = std::clamp(j - 1, 0, std::max(ny_ - 3, 0));
+        const auto hu = [&](int k) { return double(h(std::min(iu + k, nx_ - 1), j)); };
+        const auto hv = [&](int k) { return double(h(i, std::min(jv + k, ny_ - 1))); };
+        const double dhdu = nx_ < 3 ? (hu(1) - hu(0)) / du() : slope(hu(0), hu(1), hu(2), i, nx_, du());
+        const double dhdv = ny_ < 3 ? (hv(1) - hv(0)) / dv() : slope(hv(0), hv(1), hv(2), j, ny_, dv());
         return static_cast<Vec3>(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
     }
 
