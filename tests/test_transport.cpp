@@ -466,6 +466,14 @@ TEST_CASE("transport start: a lens that spreads its light wider than itself thro
     CHECK(lens.wall_fraction == 0);  // no light into the walls...
     CHECK(lens.strip_margin == 0);   // so no strip
 
+    // Spreading further: three times its size (more sag and glass, as the script of
+    // benchmarks/results/lens_walls gives it). Its outermost column was 16-17 % short
+    // until the border goals were continued straight (extrapolate_border_aims).
+    Scene wider = lens_scene(0.3);
+    wider.surface.material = Lens{1.49, 0.02};
+    wider.surface.h_min = -0.016, wider.surface.h_max = 0.016;
+    check(wider, "lens, receiver three times its size", 0);
+
     Scene point = lens_scene(0.2);
     point.light.shape = PointLight{{0, 0, 0.3}, {0, 0, 0}, {}};
     CHECK(lens_rim(point) > 0);

@@ -30,10 +30,13 @@ namespace freeform {
 // The top of what is exported: the face itself, or for a lens with a rim (lens_rim) the
 // face and, beyond its edges, the rim's top, rounded up to whole cells of the face's mesh.
 // Light falls on the face only and rays inside the glass only go down, so nothing traced
-// meets the rim's top; it continues the face's edge slopes linearly (the face's one-sided
-// edge normals become central differences of the same value, and the spline fitted over
-// the whole top stays smooth across the edge). The exported solid's walls and back face
-// then stand where the tracer's do (make_material_view).
+// meets the rim's top. Its first vertex beyond an edge continues the parabola through the
+// face's last three, so that the top's central-difference normal at the face's edge is
+// the face's own second-order one-sided one (Heightmap::vertex_normal) and the face's
+// border cells keep their Phong patches; from there the rim goes on straight (its slope
+// beyond the first vertex constant: no growing curvature, and the spline fitted over the
+// whole top stays smooth across the edge). The exported solid's walls and back face then
+// stand where the tracer's do (make_material_view).
 inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
     const double rim = lens_rim(scene);
     if (!(rim > 0)) return face;
@@ -43,12 +46,15 @@ inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
     const auto at = [&](int i, int j) -> double& { return h[std::size_t(j) * std::size_t(nx) + std::size_t(i)]; };
     for (int j = 0; j < face.ny(); ++j)
         for (int i = 0; i < face.nx(); ++i) at(i + pu, j + pv) = face(i, j);
-    // A line of the top, x(k) its k-th point: n on the face, continued p beyond each end.
+    // A line of the top, x(k) its k-th point: n on the face, continued p beyond each end
+    // (edge e, inner neighbours e + d and e + 2d, outwards -d).
     const auto extend = [](auto&& x, int n, int p) {
-        for (int k = 1; k <= p; ++k) {
-            x(p - k) = x(p) + k * (x(p) - x(p + 1));
-            x(p + n - 1 + k) = x(p + n - 1) + k * (x(p + n - 1) - x(p + n - 2));
-        }
+        const auto side = [&](int e, int d) {
+            const double second = n >= 3 ? x(e) - 2 * x(e + d) + x(e + 2 * d) : 0.0;
+            const double first = x(e) + (x(e) - x(e + d)) + second;  // the parabola, one step out
+            for (int k = 1; k <= p; ++k) x(e - k * d) = first + (k - 1) * (first - x(e));
+        };
+        if (p > 0) side(p, 1), side(p + n - 1, -1);
     };
     // Along u on the face's rows, then along v on every column (the corners continue both).
     for (int j = pv; j < pv + face.ny(); ++j) extend([&](int i) -> double& { return at(i, j); }, face.nx(), pu);
