@@ -89,29 +89,14 @@ struct GridSag {
     }
 };
 
-namespace sag_detail {
-
-// d/dt at point k of a line of values x(0..n−1) spaced h: the central difference, and at
-// the ends the second-order one-sided difference (−3 x0 + 4 x1 − x2) / 2h, the derivative
-// at the end point itself (the two-point difference x1 − x0 is the one half a step
-// inwards); a line of two points has its one chord.
-template <class At>
-double line_derivative(const At& x, int k, int n, double h) {
-    if (n < 3) return (x(1) - x(0)) / h;
-    if (k == 0) return (-3 * x(0) + 4 * x(1) - x(2)) / (2 * h);
-    if (k == n - 1) return (3 * x(n - 1) - 4 * x(n - 2) + x(n - 3)) / (2 * h);
-    return (x(k + 1) - x(k - 1)) / (2 * h);
-}
-
-}  // namespace sag_detail
-
 // The grid sag table of the height map `hm` (metres, j growing with v): per vertex its
 // height, the slopes of its vertex normal, and the twist d²z/dudv.
 //
 // The twist is the mean of d(z_u)/dv and d(z_v)/du, each a central difference of the
-// vertex slopes (second-order one-sided at the border, line_derivative). In the interior
-// both are the same four-point cross difference of the heights, (h(i+1,j+1) − h(i−1,j+1)
-// − h(i+1,j−1) + h(i−1,j−1)) / (4 du dv), exact for a quadratic; at the border the two
+// vertex slopes (second-order one-sided at the border: line_derivative,
+// surface/heightmap.hpp, the rule of the vertex normals themselves). In the interior both
+// are the same four-point cross difference of the heights, (h(i+1,j+1) − h(i−1,j+1) −
+// h(i+1,j−1) + h(i−1,j−1)) / (4 du dv), exact for a quadratic; at the border the two
 // stencils differ and the mean favours neither axis. A zero twist (Ferguson's patches)
 // would flatten every cell's cross term: wrong on a saddle-like or tilted-paraboloid design.
 inline GridSag grid_sag_of(const Heightmap& hm) {
@@ -123,14 +108,14 @@ inline GridSag grid_sag_of(const Heightmap& hm) {
     g.z.resize(n), g.z_x.resize(n), g.z_y.resize(n), g.z_xy.resize(n);
     for (std::size_t k = 0; k < n; ++k) {
         const Vec3d nv = Vec3d(hm.normals()[k]);
-        g.z[k] = double(hm(int(k % std::size_t(nx)), int(k / std::size_t(nx))));
+        g.z[k] = double(hm.heights()[k]);
         g.z_x[k] = -nv.x / nv.z, g.z_y[k] = -nv.y / nv.z;
     }
     const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
-            const double sxy = sag_detail::line_derivative([&](int jj) { return g.z_x[at(i, jj)]; }, j, ny, g.dy);
-            const double syx = sag_detail::line_derivative([&](int ii) { return g.z_y[at(ii, j)]; }, i, nx, g.dx);
+            const double sxy = line_derivative([&](int jj) { return g.z_x[at(i, jj)]; }, j, ny, g.dy);
+            const double syx = line_derivative([&](int ii) { return g.z_y[at(ii, j)]; }, i, nx, g.dx);
             g.z_xy[at(i, j)] = 0.5 * (sxy + syx);
         }
     return g;

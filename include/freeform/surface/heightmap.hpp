@@ -64,6 +64,19 @@ struct HeightfieldView {
     }
 };
 
+// d/dt at point k of a line of values x(0..n-1) spaced h: the central difference, and at
+// the ends the second-order one-sided difference (-3 x0 + 4 x1 - x2) / 2h, the derivative
+// at the end point itself (the two-point difference x1 - x0 is the one half a step
+// inwards); a line of two points has its one chord. The rule of the vertex normals, and of
+// every derivative taken from them (io/sag.hpp's twist).
+template <class At>
+double line_derivative(const At& x, int k, int n, double h) {
+    if (n < 3) return (x(1) - x(0)) / h;
+    if (k == 0) return (-3 * x(0) + 4 * x(1) - x(2)) / (2 * h);
+    if (k == n - 1) return (3 * x(n - 1) - 4 * x(n - 2) + x(n - 3)) / (2 * h);
+    return (x(k + 1) - x(k - 1)) / (2 * h);
+}
+
 class Heightmap {
 public:
     Heightmap() = default;
@@ -146,18 +159,8 @@ public:
     // and by overlays that preview a move, so both agree to the last bit.
     template <class Heights>
     Vec3 vertex_normal(const Heights& h, int i, int j) const {
-        const auto slope = [](double lo, double mid, double hi, int at, int n, double d) {
-            if (at == 0) return (-3 * lo + 4 * mid - hi) / (2 * d);
-            if (at == n - 1) return (3 * hi - 4 * mid + lo) / (2 * d);
-            return (hi - lo) / (2 * d);
-        };
-        // Three heights along u and along v: the stencil, shifted inwards at the border
-        // (a grid of two vertices has one chord).
-        const int iu = std::clamp(i - 1, 0, std::max(nx_ - 3, 0)), jv = std::clamp(j - 1, 0, std::max(ny_ - 3, 0));
-        const auto hu = [&](int k) { return double(h(std::min(iu + k, nx_ - 1), j)); };
-        const auto hv = [&](int k) { return double(h(i, std::min(jv + k, ny_ - 1))); };
-        const double dhdu = nx_ < 3 ? (hu(1) - hu(0)) / du() : slope(hu(0), hu(1), hu(2), i, nx_, du());
-        const double dhdv = ny_ < 3 ? (hv(1) - hv(0)) / dv() : slope(hv(0), hv(1), hv(2), j, ny_, dv());
+        const double dhdu = line_derivative([&](int k) { return double(h(k, j)); }, i, nx_, du());
+        const double dhdv = line_derivative([&](int k) { return double(h(i, k)); }, j, ny_, dv());
         return static_cast<Vec3>(normalize(Vec3d{-dhdu, -dhdv, 1.0}));
     }
 
