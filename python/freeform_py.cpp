@@ -388,12 +388,16 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     }
     scene.optimise.progress_every = 500;  // as the command line's: the same convergence.csv
     const freeform::Limits limits;
+    // Planned once, as the command line does: the memory check (before any surface is
+    // made) and the design read the same levels.
+    std::vector<freeform::LevelPlan> levels = freeform::plan_levels(scene);
     freeform::check_resources(scene, freeform::RunKind::design,
-                              freeform::thread_count(freeform::exec::omp_t{scene.optimise.threads}), limits);
+                              freeform::thread_count(freeform::exec::omp_t{scene.optimise.threads}), limits, &levels);
     if (!target) target = freeform::io::load_target_image(scene, limits);
     const std::vector<freeform::ExportFormat> formats = freeform::io::export_formats(scene);
+    freeform::PlannedDesign plan =
+        freeform::plan_design(scene, freeform::io::load_start_surface(scene, limits), std::move(levels));
     freeform::DesignSetup setup;
-    setup.initial = freeform::io::load_start_surface(scene, limits);
 
     ProgressState state;
     state.function = progress;
@@ -403,7 +407,7 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     {
         py::gil_scoped_release released;
         setup.callbacks.progress = [&](const freeform::DesignProgress& p) { return state.report(p); };
-        done = freeform::design(scene, *target, setup);
+        done = freeform::design(std::move(plan), *target, setup);
         json m = freeform::io::design_metrics_json(*done);
         m["command"] = "design";
         m["scene"] = ps.path ? json(*ps.path) : json(nullptr);

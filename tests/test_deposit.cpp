@@ -129,14 +129,17 @@ TEST_CASE("cell means: the error converges as rays double, and is the nearest-de
     o.rays_per_cell = 16;
     o.tolerance = 0.002;
     int calls = 0;
-    const CellMeans c = converged_cell_means(s, hm, &target, o, [&](const Scene& sc, const RaySet& rays, Histogram& h, TraceTotals& t) {
+    const auto trace = [&](const Scene& sc, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
+        const RaySet& rays = batch.rays;
         CHECK(sc.receiver.deposit == Deposit::nearest);
+        CHECK(batch.params.receiver.deposit == Deposit::nearest);
         CHECK(rays.size() == ray_budget(sc.light, sc.receiver));
         ++calls;
         const Traced tr = trace_scene(sc, hm, rays);
         h = tr.histogram;
         t = tr.totals;
-    });
+    };
+    const CellMeans c = converged_cell_means(s, hm, &target, o, trace);
     CHECK(c.converged);
     CHECK(c.change_on_doubling < 0.002);
     CHECK(c.batches == calls);

@@ -429,8 +429,7 @@ TEST_CASE("held-out checks: the kept state is no worse on held-out rays than the
         Heightmap start = surface_for(c.scene, SmallCase::mesh);
         const Penalties none = default_penalties(on);
         const ObjectiveWeights w{on.sobel_weight, on.energy_threshold, on.lost_light_weight};
-        HeldOutCheck judge(start, c.scene.light, c.scene.receiver, make_path_params(c.scene), c.target, w, none,
-                           a.held_out_seed, 1);
+        HeldOutCheck judge(make_trace_setup(c.scene, start, &c.target, a.held_out_seed), w, none, 1);
         if (s.held_out_kept < 0) {
             CHECK(same_bits(a.surface.heights(), b.surface.heights()));
         } else {

@@ -155,13 +155,14 @@ void check_exported_matches(Scene s, int n, double max_l1) {
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
     const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1);
     REQUIRE(st.report.used == StartKind::transport);
-    const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
+    const TraceSetup setup = make_trace_setup(s, st.surface, nullptr, 1);
+    const RaySet& rays = setup.rays;
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);
     const Fabrication f = make_fabrication(s, st.surface);
-    const ExportedTrace e = trace_exported(exec::omp, s, st.surface, f.subdivisions, rays);
+    const ExportedTrace e = trace_exported(exec::omp, s, st.surface, f.subdivisions, setup);
     const double l1 = l1_distance(design.histogram, e.histogram) / (2.0 * double(rays.total));
     // And the same facets with k = 1: far off, or the check above could not fail.
-    const ExportedTrace coarse = trace_exported(exec::omp, s, st.surface, 1, rays);
+    const ExportedTrace coarse = trace_exported(exec::omp, s, st.surface, 1, setup);
     const double l1_coarse = l1_distance(design.histogram, coarse.histogram) / (2.0 * double(rays.total));
     MESSAGE("k = ", f.subdivisions, " (normal error ", f.normal_error * 1e3, " mrad, tolerance ",
             f.normal_tolerance * 1e3, " mrad): L1 to the design ", l1, "; k = 1: ", l1_coarse);

@@ -39,14 +39,15 @@ FormDistances distances(Scene s, int n) {
     const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1);
     REQUIRE(st.report.used == StartKind::transport);
     const Heightmap& hm = st.surface;
-    const RaySet rays = generate_rays(s.light, hm, s.receiver, 1);
+    const TraceSetup setup = make_trace_setup(s, hm, nullptr, 1);
+    const RaySet& rays = setup.rays;
     const Traced design = trace_scene(s, hm, rays, exec::omp);
     const BSplineSurface spline = fit_bspline(hm, s.surface.phong_alpha, spline_samples_per_cell);
     const ExportedGeometry g = smooth_geometry(s, hm, 2, [&](int ci, int cj, double a, double b) {
         return spline_vertex(spline, hm, ci, cj, a, b);
     });
-    const ExportedTrace smooth = trace_exported(exec::omp, s, g, rays);
-    const ExportedTrace facets = trace_exported(exec::omp, s, hm, 1, rays);
+    const ExportedTrace smooth = trace_exported(exec::omp, s, g, setup);
+    const ExportedTrace facets = trace_exported(exec::omp, s, hm, 1, setup);
     FormDistances d;
     d.smooth = l1_distance(design.histogram, smooth.histogram) / (2.0 * double(rays.total));
     d.facets = l1_distance(design.histogram, facets.histogram) / (2.0 * double(rays.total));

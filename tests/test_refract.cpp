@@ -183,12 +183,12 @@ TEST_CASE("Fresnel: a flat lens at normal incidence passes (1 - R)^2; the rest i
     // not the share of what a flat lens passes.
     CellMeanOptions o;
     o.rays_per_cell = 16;
-    const CellMeans cells = converged_cell_means(s, flat, &footprint, o,
-                                                 [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& t) {
-                                                     const Traced tr = trace_scene(sc, flat, batch);
-                                                     h = tr.histogram;
-                                                     t = tr.totals;
-                                                 });
+    const auto trace = [&](const Scene& sc, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
+        const Traced tr = trace_scene(sc, flat, batch.rays);
+        h = tr.histogram;
+        t = tr.totals;
+    };
+    const CellMeans cells = converged_cell_means(s, flat, &footprint, o, trace);
     CHECK(cells.totals.energy() == doctest::Approx(single_pass).epsilon(1e-6));
     CHECK(cells.error < 0.01);  // the flat lens's own footprint, up to the nearest deposit's edges
 

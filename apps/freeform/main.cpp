@@ -513,22 +513,18 @@ Scene design_scene(const DesignArgs& a, const Limits& limits) {
 // terminal, unless --quiet), and Ctrl-C. Under MPI rank 0 alone reports.
 class DesignMonitor {
 public:
-    DesignMonitor(const DesignArgs& a, const Scene& scene)
-        : args_(a), scene_(scene), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
+    // `plan`: read here (its line is made now; the plan itself goes on to the design).
+    DesignMonitor(const DesignArgs& a, const PlannedDesign& plan)
+        : header_line_(header_line(a, plan)), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
 
     bool quiet() const { return quiet_; }
     StatusLine& status() { return status_; }
 
-    // The line that opens a design, once. It goes out when design() has planned the scene
-    // (its first phase), so that a scene the plan refuses prints nothing on stdout.
+    // The line that opens a design, once, when the design starts (its first phase).
     void header() {
         if (quiet_ || header_shown_) return;
         header_shown_ = true;
-        const auto [nx, ny] = final_mesh(scene_);
-        std::printf("designing %s: %d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu\n",
-                    args_.scene.string().c_str(), nx, ny, scene_.receiver.width, scene_.receiver.height,
-                    fitting_rays_per_cell(scene_, nx, ny), scene_.optimise.time_budget,
-                    (unsigned long long)scene_.optimise.seed);
+        std::printf("%s\n", header_line_.c_str());
     }
 
     // The phases and the live line; the progress callback stops the design after Ctrl-C.
@@ -550,8 +546,18 @@ public:
     }
 
 private:
-    const DesignArgs& args_;
-    const Scene& scene_;
+    // The plan's scene has its rays per cell raised for the final mesh.
+    static std::string header_line(const DesignArgs& a, const PlannedDesign& plan) {
+        const Scene& s = plan.scene;
+        const auto [nx, ny] = final_mesh(s, plan.levels);
+        char line[512];
+        std::snprintf(line, sizeof line, "%d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu",
+                      nx, ny, s.receiver.width, s.receiver.height, s.light.rays_per_cell, s.optimise.time_budget,
+                      (unsigned long long)s.optimise.seed);
+        return "designing " + a.scene.string() + ": " + line;
+    }
+
+    std::string header_line_;
     bool quiet_;
     StatusLine status_;
     bool header_shown_ = false;
@@ -566,7 +572,7 @@ struct DesignRun {
 };
 
 // The design itself: freeform::design, or mpi::design in freeform_mpi.
-DesignRun design_run(const DesignArgs& a, const Scene& scene, const ImageD& target, DesignSetup setup,
+DesignRun design_run(const DesignArgs& a, PlannedDesign plan, const ImageD& target, DesignSetup setup,
                      DesignMonitor& monitor) {
 #if defined(FREEFORM_WITH_MPI)
     mpi::ReplicaSetup replicas;
@@ -580,12 +586,12 @@ DesignRun design_run(const DesignArgs& a, const Scene& scene, const ImageD& targ
             std::fprintf(stderr, "freeform: rank %d: dying on purpose (FREEFORM_TEST_ABORT_RANK)\n", world_rank);
             std::abort();
         };
-    mpi::ReplicaDesign r = mpi::design(scene, target, setup, MPI_COMM_WORLD, replicas);
+    mpi::ReplicaDesign r = mpi::design(std::move(plan), target, setup, MPI_COMM_WORLD, replicas);
     return {std::move(r.design), r.stopped_early, r.replicas ? mpi::replicas_json(*r.replicas) : json()};
 #else
     (void)a;
     (void)monitor;
-    CompletedDesign d = design(scene, target, setup);
+    CompletedDesign d = design(std::move(plan), target, setup);
     const bool stopped_early = d.result.stopped_early;
     return {std::move(d), stopped_early, json()};
 #endif
@@ -616,17 +622,20 @@ int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
     const Scene scene = design_scene(a, limits);
     check_output_dir(a.out, design_outputs);
-    check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits);
+    // Planned once: the memory check (before any surface is made), the header line and the
+    // design read the same levels.
+    std::vector<LevelPlan> levels = plan_levels(scene);
+    check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits, &levels);
     const ImageD target = io::load_target_image(scene, limits);
     const std::vector<ExportFormat> formats = io::export_formats(scene);  // a format this build lacks: exit 2 now
+    PlannedDesign plan = plan_design(scene, io::load_start_surface(scene, limits), std::move(levels));
     DesignSetup setup;
-    setup.initial = io::load_start_surface(scene, limits);
     setup.start_only = a.start_only;
 
     std::signal(SIGINT, on_sigint);
-    DesignMonitor monitor(a, scene);
+    DesignMonitor monitor(a, plan);
     setup.callbacks = monitor.callbacks();
-    DesignRun run = design_run(a, scene, target, std::move(setup), monitor);
+    DesignRun run = design_run(a, std::move(plan), target, std::move(setup), monitor);
     // Another MPI rank: rank 0 writes the winner's design.
     if (!run.design) return run.stopped_early ? 130 : 0;
     monitor.status().finish();

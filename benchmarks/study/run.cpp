@@ -308,10 +308,9 @@ int run(const Args& a) {
         fab_scene.surface.phong_alpha = alpha;
         const Fabrication fab = make_fabrication(fab_scene, result_surface);
         const ExportedGeometry geometry = exported_geometry(fab_scene, result_surface, fab.subdivisions);
-        const RaySet rays = generate_rays(judge.light, result_surface, judge.receiver, eval_seed);
-        const ExportedTrace e = trace_exported(exec::omp_t{a.threads}, judge, geometry, rays);
-        out["final"]["error_exported"] =
-            l1_error(e.histogram, make_target(target, judge.receiver.width, judge.receiver.height, rays.total));
+        const TraceSetup setup = make_trace_setup(judge, result_surface, &target, eval_seed);
+        const ExportedTrace e = trace_exported(exec::omp_t{a.threads}, judge, geometry, setup);
+        out["final"]["error_exported"] = l1_error(e.histogram, setup.target);
         out["final"]["export_subdivisions"] = fab.subdivisions;
         // The figure that counts (docs/measures.md): cell means of the exported mesh.
         CellMeanOptions cm;

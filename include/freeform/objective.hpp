@@ -5,3 +5,4 @@
 #include "objective/objective.hpp"
 #include "objective/penalty.hpp"
 #include "objective/target.hpp"
+#include "objective/trace_setup.hpp"

@@ -14,9 +14,8 @@
 #include "../core/histogram.hpp"
 #include "../core/rng.hpp"
 #include "../objective/target.hpp"
-#include "../scene/rays.hpp"
+#include "../objective/trace_setup.hpp"
 #include "../scene/scene.hpp"
-#include "../trace/setup.hpp"
 #include "../trace/tracer.hpp"
 
 namespace freeform {
@@ -40,10 +39,11 @@ struct CellMeans {
     bool converged = false;  // change_on_doubling < tolerance (false: stopped at the cap)
 };
 
-// Traces batches of rays until the cell-mean error converges. trace(scene, rays, hist,
-// totals) traces one batch into hist (deposits) and totals (where the weight went), as
-// a tracer's trace_all does; it is given `scene` with receiver.deposit = nearest and
-// light.rays_per_cell = one batch's.
+// Traces batches of rays until the cell-mean error converges. trace(scene, batch, hist,
+// totals) traces one batch (its rays and path parameters: make_trace_setup) into hist
+// (deposits) and totals (where the weight went), as a tracer's trace_all does; it is
+// given `scene` with receiver.deposit = nearest and light.rays_per_cell = one batch's, for
+// what a tracer needs beyond the set-up (meshes, the light's direction).
 // `grid` places the rays (the aperture and top of the surface, scene/rays.hpp). Without
 // a target one batch of max_rays_per_cell is traced.
 template <class Trace>
@@ -51,7 +51,6 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
                                const CellMeanOptions& o, Trace&& trace) {
     Scene s = scene;
     s.receiver.deposit = Deposit::nearest;
-    const PathParams params = make_path_params(s);  // for the target's total (Fresnel)
     s.light.rays = 0;
     s.light.rays_per_cell = target ? o.rays_per_cell : o.max_rays_per_cell;
     CellMeans out;
@@ -60,15 +59,16 @@ CellMeans converged_cell_means(const Scene& scene, const Heightmap& grid, const 
     Fixed emitted = 0;  // the light's, so energy() is the share delivered, as the design's
     double previous = -1;
     while (true) {
-        const RaySet rays = generate_rays(s.light, grid, s.receiver, hash_combine(o.seed, std::uint64_t(out.batches) + 1));
-        Histogram batch(s.receiver.width, s.receiver.height);
+        const TraceSetup batch =
+            make_trace_setup(s, grid, nullptr, hash_combine(o.seed, std::uint64_t(out.batches) + 1));
+        Histogram hist = batch.empty_histogram();
         TraceTotals batch_totals;
-        trace(static_cast<const Scene&>(s), rays, batch, batch_totals);
-        for (std::size_t k = 0; k < batch.cells.size(); ++k) out.histogram.cells[k] += batch.cells[k];
+        trace(static_cast<const Scene&>(s), batch, hist, batch_totals);
+        for (std::size_t k = 0; k < hist.cells.size(); ++k) out.histogram.cells[k] += hist.cells[k];
         out.totals.merge(batch_totals);
         emitted += batch_totals.emitted;
-        total += target_total(rays, params);
-        out.rays += rays.size();
+        total += target_total(batch.rays, batch.params);  // the target's: Fresnel included
+        out.rays += batch.rays.size();
         ++out.batches;
         out.rays_per_cell = double(out.rays) / double(s.receiver.cells());
         if (!target) break;

@@ -24,7 +24,7 @@
 #include <vector>
 
 #include "../anneal/annealer.hpp"
-#include "../objective/target.hpp"
+#include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/refine.hpp"
@@ -380,7 +380,7 @@ namespace design_detail {
 // it faults in. Measured on the grazing-light stress case (2 cores, 2026-11-28: 57.7
 // million crossings, 6.1 s a build on an idle machine, of which 0.5 s tracing; 12-14 s
 // under a load of 7); coarse, and only used to decide whether a time budget affords a
-// level (Designer::trace_affordable).
+// level (unaffordable_level).
 inline constexpr double rebuild_seconds_per_crossing = 100e-9;
 
 // A timed stage that is not the design's last ends when it has stopped paying: when its
@@ -522,8 +522,7 @@ struct LevelSetup {
     const LevelPlan* plan = nullptr;
     Receiver receiver;
     Light light;
-    RaySet rays;
-    PathParams params;
+    TraceSetup trace_setup;  // the level's rays, path parameters and target
     double unit = 1;
     std::optional<HeldOutCheck> held_out;
     std::size_t stages = 1;
@@ -532,457 +531,518 @@ struct LevelSetup {
     std::optional<IncrementalTrace> trace;
 };
 
+// What the parts of one design share: what it was given, fixed for the run, and what it
+// has made so far. Each part below owns one step, and Designer runs them in order:
+//   make_level_setup      a level's receiver, light, rays, target and held-out check
+//   unaffordable_level    whether a timed level can afford to build its trace
+//   make_problem          the problem a stage anneals (the level's trace passed on)
+//   preprocess            the history bandit's pre-process (the first stage only)
+//   stage_options         a stage's iteration budget, temperature and time
+//   stage_hooks           what the annealer calls back during a stage
+//   run_stage             one stage: calibrate, anneal, judge with held-out rays, keep
+//   end_stage, keep_result, keep_judged     a stage's end
+//   evaluate_on_final_mesh                   a design stopped before its last level
+template <class Callback, class Replicas>
+struct DesignState {
+    using callback_type = Callback;
+    using replicas_type = Replicas;
+
+    DesignState(const Scene& s, const ImageD& target, const DesignOptions& o, Callback& c, const Penalties& p,
+                Replicas& r)
+        : scene(s), target_image(target), options(o), callback(c), penalties(p), replicas(r),
+          timed(o.time_budget > 0 && o.max_iterations == 0),
+          weights{o.sobel_weight, o.energy_threshold, o.lost_light_weight} {}
+
+    const Scene& scene;
+    const ImageD& target_image;
+    const DesignOptions& options;
+    Callback& callback;
+    const Penalties& penalties;
+    Replicas& replicas;
+    // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
+    // may then depend on measured time (see calibrate()). Otherwise the run is timed: its
+    // calibrations are cut short by slow moves and its stages' budgets fit the speed.
+    bool timed;
+    ObjectiveWeights weights;
+    DesignClock clock;
+    int threads = 1;
+    std::vector<LevelPlan> levels;
+    DesignOptions moves;  // the options the moves are made with (colder from a transport start)
+    Heightmap surface;
+    DesignResult result;
+    std::int64_t total_iterations = 0;
+    double share_used = 0;
+    bool stop = false;
+    std::vector<int> kept_arms;  // after the history bandit's pre-process
+
+    // Whether stage si of level L is the design's last.
+    bool design_last(const LevelSetup& L, std::size_t si) const {
+        return L.index + 1 == levels.size() && si + 1 == L.stages;
+    }
+};
+
+// Level li's set-up on the design's surface (refined to the level's mesh already).
+template <class State>
+LevelSetup make_level_setup(const State& d, std::size_t li) {
+    LevelSetup L;
+    L.index = li;
+    L.plan = &d.levels[li];
+    L.receiver = level_receiver(d.scene.receiver, *L.plan);
+    // Coarse levels only shape the light roughly: fewer rays per cell make their moves
+    // cheaper without changing what they can see. The last level uses the light's own.
+    L.light = d.scene.light;
+    if (li + 1 < d.levels.size() && d.options.coarse_rays_per_cell > 0 && L.light.rays == 0)
+        L.light.rays_per_cell = std::min(L.light.rays_per_cell, d.options.coarse_rays_per_cell);
+    const auto setup = [&](std::uint64_t seed) {
+        return make_trace_setup(d.scene, L.light, L.receiver, d.surface, &d.target_image, seed);
+    };
+    L.trace_setup = setup(d.options.seed);
+    L.unit = amplitude_unit(d.scene, L.receiver, d.surface);
+    if (d.options.held_out_checks)
+        L.held_out.emplace(setup(HeldOutCheck::seed_for(d.options.seed, li)), d.weights, d.penalties, d.threads);
+    L.stages = L.plan->kernel_supports.empty() ? 1 : L.plan->kernel_supports.size();
+    return L;
+}
+
+// A time-budgeted level is annealed only when building its trace (the first problem's
+// full rebuild, estimated from a sample of its rays) leaves at least as long again for
+// its moves. Under grazing light every ray crosses some 45 cells and the build alone
+// can outlast a short budget: the letter E lit at 70 degrees from the normal, 10 s,
+// spent 25 s, most of it building traces, for 24 iterations that changed nothing
+// (docs/performance.md, "The time budget"). Returns, in words, why the level and those
+// after it are left out; nothing when it can be afforded.
+template <class State>
+std::optional<std::string> unaffordable_level(const State& d, const LevelSetup& L) {
+    const RaySet& rays = L.trace_setup.rays;
+    const RebuildSample sample = sample_rebuild(d.surface, rays, L.trace_setup.params, 64);
+    if (sample.rays == 0) return std::nullopt;
+    const double scale = double(rays.size()) / double(sample.rays);
+    const double build =
+        sample.seconds * scale / double(d.threads) + double(sample.crossings) * scale * rebuild_seconds_per_crossing;
+    const double left = d.options.time_budget - d.clock();
+    if (2 * build <= left) return std::nullopt;
+    const std::size_t after = d.levels.size() - L.index - 1;
+    return "the " + std::to_string(L.plan->mesh_x) + " x " + std::to_string(L.plan->mesh_y) + " level" +
+           (after > 0 ? " and the " + std::to_string(after) + " after it" : "") +
+           " not annealed: building its trace would take about " + one_decimal(build) + " s of the " +
+           one_decimal(std::max(left, 0.0)) + " s left";
+}
+
+// Stopped early: the surface is at this level's mesh; refine it to the final mesh so
+// that exports have the size the user asked for, and evaluate it there, so that the
+// result's irradiance, target and value describe it.
+template <class State>
+void evaluate_on_final_mesh(State& d) {
+    const LevelPlan& final_level = d.levels.back();
+    d.surface = refine_preserving_normals(d.surface, final_level.mesh_x, final_level.mesh_y);
+    const Receiver receiver = level_receiver(d.scene.receiver, final_level);
+    const auto setup = [&](std::uint64_t seed) {
+        return make_trace_setup(d.scene, d.scene.light, receiver, d.surface, &d.target_image, seed);
+    };
+    // One plain trace of the design's own rays (the judge of held_out.hpp with the
+    // design's seed): the problem's trace, its rays' cells indexed too, costs many
+    // times more under grazing light and gives the same histogram.
+    HeldOutCheck fitted(setup(d.options.seed), d.weights, d.penalties, d.threads);
+    d.result.value = fitted(d.surface);
+    d.result.irradiance = fitted.histogram();
+    d.result.target = fitted.target();
+    d.result.rays = fitted.rays();
+    if (d.options.held_out_checks) {
+        // ... and on the final level's held-out rays.
+        HeldOutCheck check(setup(HeldOutCheck::seed_for(d.options.seed, d.levels.size() - 1)), d.weights,
+                           d.penalties, d.threads);
+        d.result.held_out = check(d.surface);
+        d.result.held_out_seed = check.seed();
+    }
+}
+
+// The backend, held to the design's thread count (its full rebuilds included).
+template <class Backend>
+Backend backend_for(int threads) {
+    Backend b{};
+    if constexpr (requires { b.threads; }) b.threads = threads;
+    return b;
+}
+
+// A stage's problem on the design's surface. The level's trace, if an earlier problem
+// left one, passes to the new problem.
+template <class Backend, class State>
+BasicSurfaceProblem<Backend> make_problem(State& d, LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
+    std::optional<IncrementalTrace> reuse = std::exchange(L.trace, std::nullopt);
+    const TraceSetup& t = L.trace_setup;
+    return BasicSurfaceProblem<Backend>(d.surface, t.rays, t.params, t.target, d.weights, d.penalties, std::move(ps),
+                                        std::move(bandit), L.unit, 1.0, backend_for<Backend>(d.threads),
+                                        reuse ? &*reuse : nullptr);
+}
+
+// What a problem leaves for the next one on this level (see make_problem).
+template <class Backend>
+void keep_trace(LevelSetup& L, BasicSurfaceProblem<Backend>& problem) {
+    if constexpr (requires { requires Backend::stateless; }) L.trace.emplace(problem.take_trace());
+}
+
+template <class State>
+bool wants_preprocess(const State& d, std::size_t li, std::size_t si) {
+    const DesignOptions& o = d.options;
+    return li == 0 && si == 0 && o.bandit == BanditKind::history && !o.single_vertex &&
+           o.kernel_shapes != KernelShapes::isotropic && o.preprocess_iterations > 0 && o.preprocess_keep > 0;
+}
+
+// The history bandit's pre-process (reference §4.3.2): a short run with every shape
+// equally likely, then only the shapes that paid best are kept (d.kept_arms).
+template <class Backend, class State>
+void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) {
+    ProposalSettings all = proposals_for(d.moves, support);
+    const int arms = int(all.bank.size());
+    auto pre =
+        make_problem<Backend>(d, L, std::move(all), make_bandit(BanditKind::uniform, arms, d.options.bandit_sync));
+    const auto cal = calibrate(pre, hash_combine(stage_seed, 1), d.moves.initial_acceptance, d.timed);
+    pre.set_reference_temperature(cal.temperature);
+    AnnealOptions po;
+    po.seed = hash_combine(stage_seed, 2);
+    po.initial_temperature = cal.temperature;
+    po.cooling = 1.0;
+    po.max_iterations = d.options.preprocess_iterations;
+    po.time_budget = d.options.time_budget > 0 ? 0.05 * d.options.time_budget : 0;
+    po.threads = 1;
+    const AnnealResult pr = anneal(pre, po);
+    d.total_iterations += pr.iterations;
+    d.result.accepted += pr.accepted;
+    std::vector<double> rate(std::size_t(arms), 0.0);
+    for (int a = 0; a < arms; ++a) {
+        const auto pulls = pre.bandit().pulls()[std::size_t(a)];
+        rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
+    }
+    d.kept_arms = HistoryBandit::preselect(rate, std::min(d.options.preprocess_keep, arms));
+    std::sort(d.kept_arms.begin(), d.kept_arms.end());
+    d.result.preprocess_rates = rate;
+    keep_trace(L, pre);
+}
+
+// The stage's iteration budget: with a time budget and no iteration cap, as many
+// iterations as the measured speed fits in the stage's time (so that the temperature
+// schedule completes); otherwise the plan's, which makes the run reproducible.
+template <class State>
+std::int64_t stage_budget(const State& d, const LevelSetup& L, std::size_t si, double moves_per_second,
+                          double stage_time, int speculative) {
+    const double level_share = L.plan->time_share;
+    std::int64_t budget = std::max<std::int64_t>(1, L.plan->iterations / std::int64_t(L.stages));
+    if (d.timed) {
+        const double parallel = 1.0 + 0.6 * (std::min(speculative, d.threads) - 1);
+        budget = std::max<std::int64_t>(500, std::int64_t(0.9 * moves_per_second * parallel * stage_time));
+    }
+    if (d.options.max_iterations > 0) {
+        // The cap is shared by every stage still to run, in proportion to the levels'
+        // time shares, so that no level is starved by an earlier one.
+        double remaining_share = level_share / double(L.stages);
+        for (std::size_t lk = L.index + 1; lk < d.levels.size(); ++lk) remaining_share += d.levels[lk].time_share;
+        remaining_share += level_share * double(L.stages - si - 1) / double(L.stages);
+        const std::int64_t left = d.options.max_iterations - d.total_iterations;
+        const double mine = remaining_share > 0 ? (level_share / double(L.stages)) / remaining_share : 1.0;
+        budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
+    }
+    return d.replicas.common_budget(budget);
+}
+
+// The annealer's options for stage si of level L, from initial temperature t0, the
+// calibration's speed and the stage's time.
+template <class State>
+AnnealOptions stage_options(const State& d, const LevelSetup& L, std::size_t si, int support,
+                            std::uint64_t stage_seed, double t0, double moves_per_second, double stage_time) {
+    const DesignOptions& o = d.options;
+    AnnealOptions ao;
+    ao.seed = d.replicas.anneal_seed(stage_seed);
+    ao.initial_temperature = t0;
+    ao.cooling = o.cooling;
+    const int speculative = o.speculative > 0 ? o.speculative : d.threads;
+    const std::int64_t budget = stage_budget(d, L, si, moves_per_second, stage_time, speculative);
+    ao.max_iterations = budget;
+    ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, o.temperature_steps));
+    // The last stage of a time-budgeted run goes on until the time is up: its budget,
+    // fitted to the speed the calibration measured, often runs out first (letter E,
+    // 20 s: at 17.9 s), and the schedule simply cools on past it.
+    if (d.timed && d.design_last(L, si)) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
+    ao.patience = std::max<std::int64_t>(100, std::int64_t(o.patience_fraction * double(budget)));
+    ao.reheat_factor = o.reheat_factor;
+    ao.time_budget = o.time_budget > 0 ? stage_time : 0;
+    if (o.target_error > 0) ao.target_energy = o.target_error;
+    ao.speculative = speculative;
+    ao.threads = d.threads;
+    ao.progress_every = std::max<std::int64_t>(1, o.progress_every);
+    if (d.replicas.active()) {
+        // Every stop that could differ between replicas is decided together at the
+        // exchange points (replicas.hpp); the annealer itself stops only at the common
+        // iteration budget.
+        ao.time_budget = 0;
+        ao.target_energy = std::numeric_limits<double>::quiet_NaN();
+        ao.temperature_scale = d.replicas.stage_temperature_scale();
+        ao.exchange_every =
+            std::max<std::int64_t>(1, d.replicas.exchange_every(L.plan->mesh_x, L.plan->mesh_y, support));
+    }
+    return ao;
+}
+
+// What the annealer calls back during stage si: progress, held-out checks, and with
+// replicas their exchanges and merges.
+template <class State, class Problem>
+auto stage_hooks(State& d, Problem& problem, const LevelSetup& L, std::size_t si, const StageReport& report,
+                 HeldOutCheck* held_out, HeldOutBest& held_best, int support, double stage_time) {
+    using Hooks = StageHooks<Problem, typename State::callback_type, typename State::replicas_type>;
+    Hooks hooks{&problem, &d.result.convergence, &d.callback, {}, d.total_iterations, &d.clock, d.options.time_budget};
+    hooks.info.level = int(L.index);
+    hooks.info.levels = int(d.levels.size());
+    hooks.info.stage = int(si);
+    hooks.info.stages = int(L.stages);
+    hooks.info.mesh = std::max(L.plan->mesh_x, L.plan->mesh_y);
+    hooks.info.resolution = std::max(L.receiver.width, L.receiver.height);
+    hooks.info.kernel_support = report.kernel_support;
+    if (held_out) {
+        hooks.held_out = held_out;
+        hooks.held_best = &held_best;
+        hooks.next_check = held_out->interval();
+    }
+    if (d.timed && !d.design_last(L, si) && !d.replicas.active())
+        hooks.gain = StageGainWatch(stage_gain_window * d.options.time_budget, stage_gain_floor, d.clock());
+    if (d.replicas.active()) {
+        hooks.replicas = &d.replicas;
+        hooks.stage_deadline = d.options.time_budget > 0 ? d.clock() + stage_time : 0;
+        hooks.target = d.options.target_error;
+        if (d.replicas.shares_surface()) {
+            hooks.merge_base = d.surface.heights();
+            hooks.merge_every = d.replicas.merge_every(L.plan->mesh_x, L.plan->mesh_y, support);
+        }
+    }
+    return hooks;
+}
+
+template <class State, class Problem>
+StageReport stage_report_start(const State& d, const LevelSetup& L, int support, double t0, const Problem& problem) {
+    StageReport report;
+    report.level = int(L.index);
+    report.mesh_x = L.plan->mesh_x;
+    report.mesh_y = L.plan->mesh_y;
+    report.resolution_x = L.receiver.width;
+    report.resolution_y = L.receiver.height;
+    report.kernel_support = d.options.single_vertex ? 1 : support;
+    report.initial_temperature = t0;
+    report.error_start = problem.value().error;
+    report.rays = L.trace_setup.rays.size();
+    return report;
+}
+
+// The stage's end when the annealer left its current state in place: its best state on
+// the fitted rays is judged with the held-out rays on a copy of the surface, and the
+// problem goes to the state the judge keeps (that one, or an earlier held-out best) with
+// one full retrace, where restoring and then replacing took two. The same heights, and
+// so the same design, as restoring first: under grazing light a retrace takes seconds.
+template <class State, class Problem>
+void keep_judged(const State& d, Problem& problem, HeldOutCheck& held_out, HeldOutBest& held_best,
+                 std::int64_t iteration, StageReport& report) {
+    const std::vector<float>* fitted = problem.best_heights();  // null: the current state is the best
+    Heightmap probe;
+    if (fitted) {
+        probe = d.surface;
+        probe.set_heights(*fitted);
+    }
+    const Heightmap& best = fitted ? probe : d.surface;
+    if (held_best.offer(best, held_out(best), iteration)) {
+        if (fitted) problem.replace_heights(held_best.heights);
+    } else {
+        problem.replace_heights(held_best.heights);
+        report.held_out_kept = held_best.iteration;
+    }
+}
+
+template <class State, class Problem>
+void end_stage(State& d, const Problem& problem, const AnnealResult& ar, StageReport& report, double stage_start,
+               bool stopped) {
+    d.total_iterations += ar.iterations;
+    d.result.accepted += ar.accepted;
+    report.iterations = ar.iterations;
+    report.accepted = ar.accepted;
+    report.proposals_evaluated = ar.proposals_evaluated;
+    report.seconds = d.clock() - stage_start;
+    report.error_end = problem.value().error;
+    report.energy_end = problem.value().energy;
+    report.objective_end = problem.value().total;
+    report.bandit_weights = d.options.single_vertex ? std::vector<double>{} : problem.bandit().weights();
+    d.result.stages.push_back(report);
+    // With replicas, every replica goes on to the next stage, or none does.
+    d.result.stopped_early = d.replicas.any(stopped);
+    d.stop = d.replicas.any(stopped ||
+                            (d.options.target_error > 0 && problem.value().total <= d.options.target_error));
+}
+
+template <class State, class Problem>
+void keep_result(State& d, const Problem& problem, const ProposalSettings& ps, const StageReport& report,
+                 const LevelSetup& L, const HeldOutCheck* held_out, const HeldOutBest& held_best) {
+    d.result.irradiance = problem.histogram();
+    d.result.target = problem.image().target();
+    d.result.value = problem.value();
+    d.result.kernel_bank = ps.bank;
+    d.result.bandit_weights = report.bandit_weights;
+    d.result.rays = L.trace_setup.rays.size();
+    if (held_out) d.result.held_out = held_best.value, d.result.held_out_seed = held_out->seed();
+}
+
+// Stage si of level L: its problem, calibrated temperature and budget, the annealing
+// with held-out checks, and its end (the state kept, the report, the trace or result).
+template <class Backend, class State>
+void run_stage(State& d, LevelSetup& L, std::size_t si) {
+    const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports[si];
+    const std::uint64_t stage_seed = hash_combine(d.options.seed, L.index * 16 + si);
+    if (wants_preprocess(d, L.index, si)) preprocess<Backend>(d, L, support, stage_seed);
+    ProposalSettings ps = proposals_for(d.moves, support, d.kept_arms);
+    const int arms = std::max<int>(1, int(ps.bank.size()));
+    auto problem = make_problem<Backend>(d, L, ps, make_bandit(d.options.bandit, arms, d.options.bandit_sync));
+    const Calibration cal = calibrate(problem, stage_seed, d.moves.initial_acceptance, d.timed);
+    // Identity for one replica.
+    const double t0 = d.replicas.common_temperature(cal.temperature * d.options.initial_temperature_scale);
+    problem.set_reference_temperature(t0);
+    // Replicas that share one surface each move their own strip of it (after the
+    // calibration, which every replica makes on the whole surface alike).
+    if (d.replicas.shares_surface()) {
+        const auto [j0, j1] = d.replicas.centre_rows(d.surface.ny());
+        problem.set_centre_rows(j0, j1);
+    }
+    StageReport report = stage_report_start(d, L, support, t0, problem);
+    HeldOutCheck* held_out = L.held_out ? &*L.held_out : nullptr;
+    HeldOutBest held_best;
+    if (held_out) {
+        const ObjectiveValue v = (*held_out)(d.surface);
+        held_best.offer(d.surface, v, 0);
+        report.held_out_start = v.error;
+    }
+    // Time: this stage's share of what is left of this level's share.
+    const double level_end = d.options.time_budget * (d.share_used + L.plan->time_share);
+    const double stage_time = std::max(0.05, (level_end - d.clock()) / double(L.stages - si));
+    AnnealOptions ao = stage_options(d, L, si, support, stage_seed, t0, cal.moves_per_second, stage_time);
+    // With held-out checks (and no replicas, whose merges read the restored state), the
+    // stage's end judges the fitted best before the problem is retraced: see keep_judged.
+    const bool judge_first = held_out && !d.replicas.active();
+    ao.restore_best = !judge_first;
+    const auto stage_start = d.clock();
+    auto hooks = stage_hooks(d, problem, L, si, report, held_out, held_best, support, stage_time);
+    const AnnealResult ar = anneal(problem, ao, hooks);
+    // Sharing replicas end the stage on one surface: each holds its best since the last
+    // merge, and these are merged (unless nothing ran since; every replica ran the same
+    // iterations, so all decide alike).
+    if (d.replicas.shares_surface() && hooks.merged_at != ar.iterations)
+        hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
+    report.merges = hooks.merges;
+    if (judge_first) {
+        keep_judged(d, problem, *held_out, held_best, ar.iterations, report);
+    } else if (held_out) {
+        // The annealer ends holding its best state on the fitted rays; a state the
+        // held-out rays judged better replaces it.
+        if (!held_best.offer(d.surface, (*held_out)(d.surface), ar.iterations)) {
+            problem.replace_heights(held_best.heights);
+            report.held_out_kept = held_best.iteration;
+        }
+    }
+    if (held_out) {
+        report.held_out_end = held_best.value.error;
+        report.held_out_checks = held_best.checks;
+    }
+    report.stop_reason = hooks.gain.gave_up && !hooks.stopped ? StopReason::no_gain : ar.reason;
+    end_stage(d, problem, ar, report, stage_start, hooks.stopped);
+    if (d.design_last(L, si) || d.stop)
+        keep_result(d, problem, ps, report, L, held_out, held_best);
+    else
+        keep_trace(L, problem);
+}
+
 // The multi-level schedule of one design (docs/architecture.md, "The path of a scene
 // through a design"): schedule and start, then per level its stages (the first one
 // after the history bandit's pre-process), then the result. A stopped design is
-// evaluated on the final mesh.
+// evaluated on the final mesh. The steps are the parts above; this class orders them.
 template <class Backend, class Callback, class Replicas>
 class Designer {
   public:
-    using Problem = BasicSurfaceProblem<Backend>;
-    using Hooks = StageHooks<Problem, std::remove_reference_t<Callback>, Replicas>;
-
     // `planned`: plan_levels of the scene with these options, when the caller has them
     // (plan_design); null: planned here.
     Designer(const Scene& scene, const ImageD& target_image, const DesignOptions& options, Callback& callback,
              const Penalties& penalties, Replicas& replicas, const std::vector<LevelPlan>* planned = nullptr)
-        : scene_(scene), target_image_(target_image), options_(options), callback_(callback), penalties_(penalties),
-          replicas_(replicas), planned_(planned),
-          // An iteration cap, or no time budget, makes a run reproducible bit for bit:
-          // nothing may then depend on measured time (see calibrate()). Otherwise the run
-          // is timed: its calibrations are cut short by slow moves and its stages' budgets
-          // fit the speed.
-          timed_(options.time_budget > 0 && options.max_iterations == 0),
-          weights_{options.sobel_weight, options.energy_threshold, options.lost_light_weight} {}
+        : d_(scene, target_image, options, callback, penalties, replicas), planned_(planned) {}
 
     DesignResult run(Heightmap initial) {
         schedule(std::move(initial));
-        for (std::size_t li = 0; li < levels_.size() && !stop_; ++li) run_level(li);
+        for (std::size_t li = 0; li < d_.levels.size() && !d_.stop; ++li) run_level(li);
         // The annealed surface, as the annealer left it: smoothing and the milling tool's
         // cut are finishing, done once, by finish_design (pipeline.hpp), which then judges
         // the finished surface for every figure it reports.
-        result_.surface = std::move(surface_);
-        result_.iterations = total_iterations_;
-        result_.seconds = clock_();
-        return std::move(result_);
+        d_.result.surface = std::move(d_.surface);
+        d_.result.iterations = d_.total_iterations;
+        d_.result.seconds = d_.clock();
+        return std::move(d_.result);
     }
 
   private:
     // The levels plan_levels gives the scene with these options.
     std::vector<LevelPlan> plan_here() const {
-        Scene planned = scene_;
-        planned.optimise = options_;
+        Scene planned = d_.scene;
+        planned.optimise = d_.options;
         return plan_levels(planned);
     }
 
     // The levels, the start, and the levels the start leaves to run.
     void schedule(Heightmap initial) {
-        levels_ = !options_.levels.empty() ? options_.levels : planned_ ? *planned_ : plan_here();
-        threads_ = thread_count(exec::omp_t{options_.threads});
+        const DesignOptions& o = d_.options;
+        d_.levels = !o.levels.empty() ? o.levels : planned_ ? *planned_ : plan_here();
+        d_.threads = thread_count(exec::omp_t{o.threads});
         // Where to start and which of the planned levels that start still needs, computed
         // once: with replicas, one computes it and hands it to the others (replicas.hpp).
-        const int planned_count = int(levels_.size());
-        SharedStart start = replicas_.share_start(
-            [&] { return prepare_start(scene_, std::move(initial), target_image_, options_, levels_, threads_); });
-        result_.start = start.report;
+        const int planned_count = int(d_.levels.size());
+        SharedStart start = d_.replicas.share_start(
+            [&] { return prepare_start(d_.scene, std::move(initial), d_.target_image, o, d_.levels, d_.threads); });
+        d_.result.start = start.report;
         if (start.skip > 0) {
             // The schedule goes on as planned from the first level kept (its kernels too:
             // the large ones of the coarse levels would only re-shape what the start has).
-            levels_.erase(levels_.begin(), levels_.begin() + start.skip);
-            assign_time_shares(levels_);
+            d_.levels.erase(d_.levels.begin(), d_.levels.begin() + start.skip);
+            assign_time_shares(d_.levels);
         }
-        for (std::size_t k = 0; k < levels_.size(); ++k)
-            if (levels_[k].kernel_supports.empty()) levels_[k].kernel_supports = level_kernel_supports(levels_, k);
-        result_.start.levels_planned = planned_count;
-        result_.start.levels_used = int(levels_.size());
+        for (std::size_t k = 0; k < d_.levels.size(); ++k)
+            if (d_.levels[k].kernel_supports.empty())
+                d_.levels[k].kernel_supports = level_kernel_supports(d_.levels, k);
+        d_.result.start.levels_planned = planned_count;
+        d_.result.start.levels_used = int(d_.levels.size());
         // From a transport start the annealer refines: moves shift light by at most
         // refine_max_shift_cells and start colder (refine_initial_acceptance), so that its
         // first, hottest iterations do not undo the layout the start already has.
-        moves_ = options_;
+        d_.moves = o;
         if (start.transport) {
-            moves_.max_shift_cells = std::min(options_.max_shift_cells, options_.refine_max_shift_cells);
-            moves_.min_shift_cells = std::min(options_.min_shift_cells, moves_.max_shift_cells);
-            moves_.initial_acceptance = std::min(options_.initial_acceptance, options_.refine_initial_acceptance);
+            d_.moves.max_shift_cells = std::min(o.max_shift_cells, o.refine_max_shift_cells);
+            d_.moves.min_shift_cells = std::min(o.min_shift_cells, d_.moves.max_shift_cells);
+            d_.moves.initial_acceptance = std::min(o.initial_acceptance, o.refine_initial_acceptance);
         }
-        surface_ = std::move(start.surface);
+        d_.surface = std::move(start.surface);
     }
 
+    // A level: the surface refined to its mesh, its set-up, and its stages, unless a
+    // timed design cannot afford its trace (the design then ends there, said in the
+    // start's plan).
     void run_level(std::size_t li) {
-        LevelSetup L;
-        L.index = li;
-        L.plan = &levels_[li];
-        surface_ = refine_preserving_normals(surface_, L.plan->mesh_x, L.plan->mesh_y);
-        L.receiver = level_receiver(scene_.receiver, *L.plan);
-        // Coarse levels only shape the light roughly: fewer rays per cell make their moves
-        // cheaper without changing what they can see. The last level uses the light's own.
-        L.light = scene_.light;
-        if (li + 1 < levels_.size() && options_.coarse_rays_per_cell > 0 && L.light.rays == 0)
-            L.light.rays_per_cell = std::min(L.light.rays_per_cell, options_.coarse_rays_per_cell);
-        L.rays = generate_rays(L.light, surface_, L.receiver, options_.seed);
-        L.params = make_path_params(scene_, L.receiver);
-        L.unit = amplitude_unit(scene_, L.receiver, surface_);
-        if (options_.held_out_checks)
-            L.held_out.emplace(surface_, L.light, L.receiver, L.params, target_image_, weights_, penalties_,
-                               HeldOutCheck::seed_for(options_.seed, li), threads_);
-        L.stages = L.plan->kernel_supports.empty() ? 1 : L.plan->kernel_supports.size();
-        if (timed_ && !trace_affordable(L)) return;
-        for (std::size_t si = 0; si < L.stages && !stop_; ++si) run_stage(L, si);
-        share_used_ += L.plan->time_share;
-        if (stop_ && li + 1 < levels_.size()) evaluate_on_final_mesh();
-    }
-
-    // A time-budgeted level is annealed only when building its trace (the first problem's
-    // full rebuild, estimated from a sample of its rays) leaves at least as long again for
-    // its moves. Under grazing light every ray crosses some 45 cells and the build alone
-    // can outlast a short budget: the letter E lit at 70 degrees from the normal, 10 s,
-    // spent 25 s, most of it building traces, for 24 iterations that changed nothing
-    // (docs/performance.md, "The time budget"). A level left out ends the design there,
-    // said in the start's plan.
-    bool trace_affordable(const LevelSetup& L) {
-        const RebuildSample sample = sample_rebuild(surface_, L.rays, L.params, 64);
-        if (sample.rays == 0) return true;
-        const double scale = double(L.rays.size()) / double(sample.rays);
-        const double build =
-            sample.seconds * scale / double(threads_) + double(sample.crossings) * scale * rebuild_seconds_per_crossing;
-        const double left = options_.time_budget - clock_();
-        if (2 * build <= left) return true;
-        result_.start.levels_used = int(L.index);
-        const std::size_t after = levels_.size() - L.index - 1;
-        result_.start.left_out = "the " + std::to_string(L.plan->mesh_x) + " x " + std::to_string(L.plan->mesh_y) +
-                                 " level" + (after > 0 ? " and the " + std::to_string(after) + " after it" : "") +
-                                 " not annealed: building its trace would take about " + one_decimal(build) +
-                                 " s of the " + one_decimal(std::max(left, 0.0)) + " s left";
-        result_.start.plan += "; " + result_.start.left_out;
-        stop_ = true;
-        evaluate_on_final_mesh();
-        return false;
-    }
-
-    // The level's trace, if an earlier problem left one, passes to the new problem.
-    Problem make_problem(LevelSetup& L, ProposalSettings ps, AnyBandit bandit) {
-        std::optional<IncrementalTrace> reuse = std::exchange(L.trace, std::nullopt);
-        return Problem(surface_, L.rays, L.params,
-                       make_target(target_image_, L.receiver.width, L.receiver.height, target_total(L.rays, L.params)),
-                       weights_, penalties_, std::move(ps), std::move(bandit), L.unit, 1.0, backend(),
-                       reuse ? &*reuse : nullptr);
-    }
-
-    // What a problem leaves for the next one on this level (see make_problem).
-    static void keep_trace(LevelSetup& L, Problem& problem) {
-        if constexpr (requires { requires Backend::stateless; }) L.trace.emplace(problem.take_trace());
-    }
-
-    // The backend, held to the design's thread count (its full rebuilds included).
-    Backend backend() const {
-        Backend b{};
-        if constexpr (requires { b.threads; }) b.threads = threads_;
-        return b;
-    }
-
-    // The history bandit's pre-process (reference §4.3.2): a short run with every shape
-    // equally likely, then only the shapes that paid best are kept.
-    void preprocess(LevelSetup& L, int support, std::uint64_t stage_seed) {
-        ProposalSettings all = proposals_for(moves_, support);
-        const int arms = int(all.bank.size());
-        Problem pre = make_problem(L, std::move(all), make_bandit(BanditKind::uniform, arms, options_.bandit_sync));
-        const auto cal = calibrate(pre, hash_combine(stage_seed, 1), moves_.initial_acceptance, timed_);
-        pre.set_reference_temperature(cal.temperature);
-        AnnealOptions po;
-        po.seed = hash_combine(stage_seed, 2);
-        po.initial_temperature = cal.temperature;
-        po.cooling = 1.0;
-        po.max_iterations = options_.preprocess_iterations;
-        po.time_budget = options_.time_budget > 0 ? 0.05 * options_.time_budget : 0;
-        po.threads = 1;
-        const AnnealResult pr = anneal(pre, po);
-        total_iterations_ += pr.iterations;
-        result_.accepted += pr.accepted;
-        std::vector<double> rate(std::size_t(arms), 0.0);
-        for (int a = 0; a < arms; ++a) {
-            const auto pulls = pre.bandit().pulls()[std::size_t(a)];
-            rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
-        }
-        kept_arms_ = HistoryBandit::preselect(rate, std::min(options_.preprocess_keep, arms));
-        std::sort(kept_arms_.begin(), kept_arms_.end());
-        result_.preprocess_rates = rate;
-        keep_trace(L, pre);
-    }
-
-    bool wants_preprocess(std::size_t li, std::size_t si) const {
-        return li == 0 && si == 0 && options_.bandit == BanditKind::history && !options_.single_vertex &&
-               options_.kernel_shapes != KernelShapes::isotropic && options_.preprocess_iterations > 0 &&
-               options_.preprocess_keep > 0;
-    }
-
-    // The stage's iteration budget: with a time budget and no iteration cap, as many
-    // iterations as the measured speed fits in the stage's time (so that the temperature
-    // schedule completes); otherwise the plan's, which makes the run reproducible.
-    std::int64_t stage_budget(const LevelSetup& L, std::size_t si, double moves_per_second, double stage_time,
-                              int speculative) const {
-        const std::size_t li = L.index;
-        const double level_share = L.plan->time_share;
-        std::int64_t budget = std::max<std::int64_t>(1, L.plan->iterations / std::int64_t(L.stages));
-        if (timed_) {
-            const double parallel = 1.0 + 0.6 * (std::min(speculative, threads_) - 1);
-            budget = std::max<std::int64_t>(500, std::int64_t(0.9 * moves_per_second * parallel * stage_time));
-        }
-        if (options_.max_iterations > 0) {
-            // The cap is shared by every stage still to run, in proportion to the levels'
-            // time shares, so that no level is starved by an earlier one.
-            double remaining_share = level_share / double(L.stages);
-            for (std::size_t lk = li + 1; lk < levels_.size(); ++lk) remaining_share += levels_[lk].time_share;
-            remaining_share += level_share * double(L.stages - si - 1) / double(L.stages);
-            const std::int64_t left = options_.max_iterations - total_iterations_;
-            const double mine = remaining_share > 0 ? (level_share / double(L.stages)) / remaining_share : 1.0;
-            budget = std::max<std::int64_t>(1, std::int64_t(double(left) * mine));
-        }
-        return replicas_.common_budget(budget);
-    }
-
-    AnnealOptions stage_options(const LevelSetup& L, std::size_t si, int support, std::uint64_t stage_seed, double t0,
-                                double moves_per_second, double stage_time, bool last) const {
-        AnnealOptions ao;
-        ao.seed = replicas_.anneal_seed(stage_seed);
-        ao.initial_temperature = t0;
-        ao.cooling = options_.cooling;
-        const int speculative = options_.speculative > 0 ? options_.speculative : threads_;
-        const std::int64_t budget = stage_budget(L, si, moves_per_second, stage_time, speculative);
-        ao.max_iterations = budget;
-        ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, options_.temperature_steps));
-        // The last stage of a time-budgeted run goes on until the time is up: its budget,
-        // fitted to the speed the calibration measured, often runs out first (letter E,
-        // 20 s: at 17.9 s), and the schedule simply cools on past it.
-        if (timed_ && last) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
-        ao.patience = std::max<std::int64_t>(100, std::int64_t(options_.patience_fraction * double(budget)));
-        ao.reheat_factor = options_.reheat_factor;
-        ao.time_budget = options_.time_budget > 0 ? stage_time : 0;
-        if (options_.target_error > 0) ao.target_energy = options_.target_error;
-        ao.speculative = speculative;
-        ao.threads = threads_;
-        ao.progress_every = std::max<std::int64_t>(1, options_.progress_every);
-        if (replicas_.active()) {
-            // Every stop that could differ between replicas is decided together at the
-            // exchange points (replicas.hpp); the annealer itself stops only at the common
-            // iteration budget.
-            ao.time_budget = 0;
-            ao.target_energy = std::numeric_limits<double>::quiet_NaN();
-            ao.temperature_scale = replicas_.stage_temperature_scale();
-            ao.exchange_every =
-                std::max<std::int64_t>(1, replicas_.exchange_every(L.plan->mesh_x, L.plan->mesh_y, support));
-        }
-        return ao;
-    }
-
-    Hooks stage_hooks(Problem& problem, const LevelSetup& L, std::size_t si, const StageReport& report,
-                      HeldOutCheck* held_out, HeldOutBest& held_best, int support, double stage_time) {
-        Hooks hooks{&problem, &result_.convergence, &callback_, {}, total_iterations_, &clock_, options_.time_budget};
-        hooks.info.level = int(L.index);
-        hooks.info.levels = int(levels_.size());
-        hooks.info.stage = int(si);
-        hooks.info.stages = int(L.stages);
-        hooks.info.mesh = std::max(L.plan->mesh_x, L.plan->mesh_y);
-        hooks.info.resolution = std::max(L.receiver.width, L.receiver.height);
-        hooks.info.kernel_support = report.kernel_support;
-        if (held_out) {
-            hooks.held_out = held_out;
-            hooks.held_best = &held_best;
-            hooks.next_check = held_out->interval();
-        }
-        if (timed_ && !design_last(L, si) && !replicas_.active())
-            hooks.gain = StageGainWatch(stage_gain_window * options_.time_budget, stage_gain_floor, clock_());
-        if (replicas_.active()) {
-            hooks.replicas = &replicas_;
-            hooks.stage_deadline = options_.time_budget > 0 ? clock_() + stage_time : 0;
-            hooks.target = options_.target_error;
-            if (replicas_.shares_surface()) {
-                hooks.merge_base = surface_.heights();
-                hooks.merge_every = replicas_.merge_every(L.plan->mesh_x, L.plan->mesh_y, support);
+        const LevelPlan& plan = d_.levels[li];
+        d_.surface = refine_preserving_normals(d_.surface, plan.mesh_x, plan.mesh_y);
+        LevelSetup L = make_level_setup(d_, li);
+        if (d_.timed) {
+            if (std::optional<std::string> left_out = unaffordable_level(d_, L)) {
+                d_.result.start.levels_used = int(li);
+                d_.result.start.left_out = *left_out;
+                d_.result.start.plan += "; " + *left_out;
+                d_.stop = true;
+                evaluate_on_final_mesh(d_);
+                return;
             }
         }
-        return hooks;
+        for (std::size_t si = 0; si < L.stages && !d_.stop; ++si) run_stage<Backend>(d_, L, si);
+        d_.share_used += plan.time_share;
+        if (d_.stop && li + 1 < d_.levels.size()) evaluate_on_final_mesh(d_);
     }
 
-    StageReport stage_report_start(const LevelSetup& L, int support, double t0, const Problem& problem) const {
-        StageReport report;
-        report.level = int(L.index);
-        report.mesh_x = L.plan->mesh_x;
-        report.mesh_y = L.plan->mesh_y;
-        report.resolution_x = L.receiver.width;
-        report.resolution_y = L.receiver.height;
-        report.kernel_support = options_.single_vertex ? 1 : support;
-        report.initial_temperature = t0;
-        report.error_start = problem.value().error;
-        report.rays = L.rays.size();
-        return report;
-    }
-
-    // Whether stage si of level L is the design's last.
-    bool design_last(const LevelSetup& L, std::size_t si) const {
-        return L.index + 1 == levels_.size() && si + 1 == L.stages;
-    }
-
-    void run_stage(LevelSetup& L, std::size_t si) {
-        const std::size_t li = L.index;
-        const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports[si];
-        const std::uint64_t stage_seed = hash_combine(options_.seed, li * 16 + si);
-        const bool last = design_last(L, si);
-        if (wants_preprocess(li, si)) preprocess(L, support, stage_seed);
-        ProposalSettings ps = proposals_for(moves_, support, kept_arms_);
-        const int arms = std::max<int>(1, int(ps.bank.size()));
-        Problem problem = make_problem(L, ps, make_bandit(options_.bandit, arms, options_.bandit_sync));
-        const Calibration cal = calibrate(problem, stage_seed, moves_.initial_acceptance, timed_);
-        // Identity for one replica.
-        const double t0 = replicas_.common_temperature(cal.temperature * options_.initial_temperature_scale);
-        problem.set_reference_temperature(t0);
-        // Replicas that share one surface each move their own strip of it (after the
-        // calibration, which every replica makes on the whole surface alike).
-        if (replicas_.shares_surface()) {
-            const auto [j0, j1] = replicas_.centre_rows(surface_.ny());
-            problem.set_centre_rows(j0, j1);
-        }
-        StageReport report = stage_report_start(L, support, t0, problem);
-        HeldOutCheck* held_out = L.held_out ? &*L.held_out : nullptr;
-        HeldOutBest held_best;
-        if (held_out) {
-            const ObjectiveValue v = (*held_out)(surface_);
-            held_best.offer(surface_, v, 0);
-            report.held_out_start = v.error;
-        }
-        // Time: this stage's share of what is left of this level's share.
-        const double level_end = options_.time_budget * (share_used_ + L.plan->time_share);
-        const double stage_time = std::max(0.05, (level_end - clock_()) / double(L.stages - si));
-        AnnealOptions ao = stage_options(L, si, support, stage_seed, t0, cal.moves_per_second, stage_time, last);
-        // With held-out checks (and no replicas, whose merges read the restored state), the
-        // stage's end judges the fitted best before the problem is retraced: see keep_judged.
-        const bool judge_first = held_out && !replicas_.active();
-        ao.restore_best = !judge_first;
-        const auto stage_start = clock_();
-        Hooks hooks = stage_hooks(problem, L, si, report, held_out, held_best, support, stage_time);
-        const AnnealResult ar = anneal(problem, ao, hooks);
-        // Sharing replicas end the stage on one surface: each holds its best since the last
-        // merge, and these are merged (unless nothing ran since; every replica ran the same
-        // iterations, so all decide alike).
-        if (replicas_.shares_surface() && hooks.merged_at != ar.iterations)
-            hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
-        report.merges = hooks.merges;
-        if (judge_first) {
-            keep_judged(problem, *held_out, held_best, ar.iterations, report);
-        } else if (held_out) {
-            // The annealer ends holding its best state on the fitted rays; a state the
-            // held-out rays judged better replaces it.
-            if (!held_best.offer(surface_, (*held_out)(surface_), ar.iterations)) {
-                problem.replace_heights(held_best.heights);
-                report.held_out_kept = held_best.iteration;
-            }
-        }
-        if (held_out) {
-            report.held_out_end = held_best.value.error;
-            report.held_out_checks = held_best.checks;
-        }
-        report.stop_reason = hooks.gain.gave_up && !hooks.stopped ? StopReason::no_gain : ar.reason;
-        end_stage(problem, ar, report, stage_start, hooks.stopped);
-        if (last || stop_)
-            keep_result(problem, ps, report, L, held_out, held_best);
-        else
-            keep_trace(L, problem);
-    }
-
-    // The stage's end when the annealer left its current state in place: its best state on
-    // the fitted rays is judged with the held-out rays on a copy of the surface, and the
-    // problem goes to the state the judge keeps (that one, or an earlier held-out best) with
-    // one full retrace, where restoring and then replacing took two. The same heights, and
-    // so the same design, as restoring first: under grazing light a retrace takes seconds.
-    void keep_judged(Problem& problem, HeldOutCheck& held_out, HeldOutBest& held_best, std::int64_t iteration,
-                     StageReport& report) {
-        const std::vector<float>* fitted = problem.best_heights();  // null: the current state is the best
-        Heightmap probe;
-        if (fitted) {
-            probe = surface_;
-            probe.set_heights(*fitted);
-        }
-        const Heightmap& best = fitted ? probe : surface_;
-        if (held_best.offer(best, held_out(best), iteration)) {
-            if (fitted) problem.replace_heights(held_best.heights);
-        } else {
-            problem.replace_heights(held_best.heights);
-            report.held_out_kept = held_best.iteration;
-        }
-    }
-
-    void end_stage(const Problem& problem, const AnnealResult& ar, StageReport& report, double stage_start,
-                   bool stopped) {
-        total_iterations_ += ar.iterations;
-        result_.accepted += ar.accepted;
-        report.iterations = ar.iterations;
-        report.accepted = ar.accepted;
-        report.proposals_evaluated = ar.proposals_evaluated;
-        report.seconds = clock_() - stage_start;
-        report.error_end = problem.value().error;
-        report.energy_end = problem.value().energy;
-        report.objective_end = problem.value().total;
-        report.bandit_weights = options_.single_vertex ? std::vector<double>{} : problem.bandit().weights();
-        result_.stages.push_back(report);
-        // With replicas, every replica goes on to the next stage, or none does.
-        result_.stopped_early = replicas_.any(stopped);
-        stop_ = replicas_.any(stopped || (options_.target_error > 0 && problem.value().total <= options_.target_error));
-    }
-
-    void keep_result(const Problem& problem, const ProposalSettings& ps, const StageReport& report,
-                     const LevelSetup& L, const HeldOutCheck* held_out, const HeldOutBest& held_best) {
-        result_.irradiance = problem.histogram();
-        result_.target = problem.image().target();
-        result_.value = problem.value();
-        result_.kernel_bank = ps.bank;
-        result_.bandit_weights = report.bandit_weights;
-        result_.rays = L.rays.size();
-        if (held_out) result_.held_out = held_best.value, result_.held_out_seed = held_out->seed();
-    }
-
-    // Stopped early: the surface is at this level's mesh; refine it to the final mesh so
-    // that exports have the size the user asked for, and evaluate it there, so that the
-    // result's irradiance, target and value describe it.
-    void evaluate_on_final_mesh() {
-        const LevelPlan& final_level = levels_.back();
-        surface_ = refine_preserving_normals(surface_, final_level.mesh_x, final_level.mesh_y);
-        const Receiver receiver = level_receiver(scene_.receiver, final_level);
-        const PathParams final_pp = make_path_params(scene_, receiver);
-        // One plain trace of the design's own rays (the judge of held_out.hpp with the
-        // design's seed): the problem's trace, its rays' cells indexed too, costs many
-        // times more under grazing light and gives the same histogram.
-        HeldOutCheck fitted(surface_, scene_.light, receiver, final_pp, target_image_, weights_, penalties_,
-                            options_.seed, threads_);
-        result_.value = fitted(surface_);
-        result_.irradiance = fitted.histogram();
-        result_.target = fitted.target();
-        result_.rays = fitted.rays();
-        if (options_.held_out_checks) {
-            // ... and on the final level's held-out rays.
-            HeldOutCheck check(surface_, scene_.light, receiver, final_pp, target_image_, weights_, penalties_,
-                               HeldOutCheck::seed_for(options_.seed, levels_.size() - 1), threads_);
-            result_.held_out = check(surface_);
-            result_.held_out_seed = check.seed();
-        }
-    }
-
-    const Scene& scene_;
-    const ImageD& target_image_;
-    const DesignOptions& options_;
-    std::remove_reference_t<Callback>& callback_;
-    const Penalties& penalties_;
-    Replicas& replicas_;
+    DesignState<std::remove_reference_t<Callback>, Replicas> d_;
     const std::vector<LevelPlan>* planned_;
-    DesignClock clock_;
-    bool timed_;
-    ObjectiveWeights weights_;
-    std::vector<LevelPlan> levels_;
-    int threads_ = 1;
-    DesignOptions moves_;  // the options the moves are made with (colder from a transport start)
-    Heightmap surface_;
-    DesignResult result_;
-    std::int64_t total_iterations_ = 0;
-    double share_used_ = 0;
-    bool stop_ = false;
-    std::vector<int> kept_arms_;  // after the history bandit's pre-process
 };
 
 template <class Backend, class Callback, class Replicas>

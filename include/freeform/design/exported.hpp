@@ -11,11 +11,11 @@
 #include <optional>
 #include <vector>
 
+#include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/export.hpp"
 #include "../trace/embree.hpp"
-#include "../trace/setup.hpp"
 #include "cell_means.hpp"
 #include "fabrication.hpp"
 
@@ -66,11 +66,13 @@ ExportedGeometry smooth_geometry(const Scene& scene, const Heightmap& grid, int 
     return g;
 }
 
-// Traces `rays` (aimed at `surface`'s aperture) through the exported geometry with the
-// scene's receiver (its deposit included).
+// Traces the rays of `setup` (aimed at the surface's aperture: make_trace_setup) through
+// the exported geometry with the set-up's receiver (its deposit included).
 template <HostPolicy P>
-ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometry& geometry, const RaySet& rays) {
-    PathParams pp = make_path_params(scene);
+ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometry& geometry,
+                             const TraceSetup& setup) {
+    const RaySet& rays = setup.rays;
+    PathParams pp = setup.params;
     pp.phong_alpha = 0.0f;  // flat facets: the mesh is its geometry
     pp.interpolated_normals = geometry.smooth;
     RaySet lens_rays;  // outlives the tracer, which refers to it
@@ -87,15 +89,15 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometr
     } else {
         tracer.emplace(geometry.mesh, rays, pp, std::vector<ExtraMesh>{}, thread_count(policy));
     }
-    ExportedTrace out{Histogram(scene.receiver.width, scene.receiver.height), {}};
+    ExportedTrace out{setup.empty_histogram(), {}};
     tracer->trace_all(policy, out.histogram, out.totals);
     return out;
 }
 
 template <HostPolicy P>
 ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
-                             const RaySet& rays) {
-    return trace_exported(policy, scene, exported_geometry(scene, surface, subdivisions), rays);
+                             const TraceSetup& setup) {
+    return trace_exported(policy, scene, exported_geometry(scene, surface, subdivisions), setup);
 }
 
 // The cell means of the exported part (cell_means.hpp): what `error_physical` reports.
@@ -104,8 +106,8 @@ template <HostPolicy P>
 CellMeans exported_cell_means(P policy, const Scene& scene, const Heightmap& surface, const ExportedGeometry& geometry,
                               const ImageD* target, const CellMeanOptions& options) {
     return converged_cell_means(scene, surface, target, options,
-                                [&](const Scene& s, const RaySet& rays, Histogram& h, TraceTotals& t) {
-                                    ExportedTrace et = trace_exported(policy, s, geometry, rays);
+                                [&](const Scene& s, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
+                                    ExportedTrace et = trace_exported(policy, s, geometry, batch);
                                     h = std::move(et.histogram);
                                     t = et.totals;
                                 });

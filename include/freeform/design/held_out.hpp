@@ -23,12 +23,13 @@
 // the fitted error is real.
 #include <algorithm>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "../core/exec.hpp"
 #include "../core/rng.hpp"
 #include "../objective/objective.hpp"
-#include "../objective/target.hpp"
+#include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../trace/heightfield.hpp"
 
@@ -42,13 +43,10 @@ public:
         return hash_combine(hash_combine(design_seed, 0x4e1d0075ULL), std::uint64_t(level));
     }
 
-    HeldOutCheck(const Heightmap& surface, const Light& light, const Receiver& receiver, const PathParams& params,
-                 const ImageD& target_image, ObjectiveWeights weights, const Penalties& penalties, std::uint64_t seed,
-                 int threads)
-        : seed_(seed), rays_(generate_rays(light, surface, receiver, seed)), params_(params),
-          image_(make_target(target_image, receiver.width, receiver.height, target_total(rays_, params))),
-          weights_(weights),
-          penalties_(&penalties), threads_(threads) {}
+    // `setup`: the rays (of seed_for's seed), path parameters and target (make_trace_setup).
+    HeldOutCheck(TraceSetup setup, ObjectiveWeights weights, const Penalties& penalties, int threads)
+        : seed_(setup.seed), rays_(std::move(setup.rays)), params_(setup.params), image_(std::move(setup.target)),
+          weights_(weights), penalties_(&penalties), threads_(threads) {}
 
     std::int64_t rays() const { return rays_.size(); }
     std::uint64_t seed() const { return seed_; }

@@ -75,9 +75,12 @@ inline void check_designable(const Scene& scene) {
 
 // Checks that `scene` can be designed and plans it. `initial` replaces the scene's start
 // (a surface read from a file); without it a scene whose start is a PFM file is refused.
-inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {}) {
+// `levels`: plan_levels(scene), when the caller has planned them already (to check the
+// memory they need before any surface is made, as the command line does).
+inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {},
+                                 std::optional<std::vector<LevelPlan>> levels = {}) {
     check_designable(scene);
-    PlannedDesign p{scene, Heightmap{}, plan_levels(scene)};
+    PlannedDesign p{scene, Heightmap{}, levels ? std::move(*levels) : plan_levels(scene)};
     const auto [nx, ny] = final_mesh(scene, p.levels);
     // Enough rays for the final mesh: the design, its checks and its final render use them.
     p.scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
@@ -95,23 +98,19 @@ inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> in
     return p;
 }
 
-// A surface traced with one set of rays at the receiver's resolution, against the target
-// scaled to those rays.
-struct TracedDesign {
-    RaySet rays;
+// A surface traced with one set of rays at the receiver's resolution (its set-up: rays,
+// path parameters, the target scaled to the rays), and what they did.
+struct TracedDesign : TraceSetup {
     Histogram histogram;
     TraceTotals totals;
-    Target target;
     double error = -1;  // l1_error(histogram, target)
 };
 
 inline TracedDesign trace_design(const Scene& scene, const Heightmap& surface, const ImageD& target, std::uint64_t seed,
                                  int threads) {
-    const PathParams pp = make_path_params(scene);
-    TracedDesign t{generate_rays(scene.light, surface, scene.receiver, seed),
-                   Histogram(scene.receiver.width, scene.receiver.height), {}, {}, -1};
-    HeightfieldTracer(surface, t.rays, pp).trace_all(exec::omp_t{threads}, t.histogram, t.totals);
-    t.target = make_target(target, scene.receiver.width, scene.receiver.height, target_total(t.rays, pp));
+    TracedDesign t{make_trace_setup(scene, surface, &target, seed), {}, {}, -1};
+    t.histogram = t.empty_histogram();
+    HeightfieldTracer(surface, t.rays, t.params).trace_all(exec::omp_t{threads}, t.histogram, t.totals);
     t.error = l1_error(t.histogram, t.target);
     return t;
 }
@@ -143,8 +142,8 @@ inline constexpr int spline_samples_per_cell = 4;
 inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
                                      const CellMeanOptions& options, int threads) {
     return converged_cell_means(scene, surface, &target, options,
-                                [&](const Scene& s, const RaySet& rays, Histogram& h, TraceTotals& t) {
-                                    HeightfieldTracer(surface, rays, make_path_params(s))
+                                [&](const Scene&, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
+                                    HeightfieldTracer(surface, batch.rays, batch.params)
                                         .trace_all(exec::omp_t{threads}, h, t);
                                 });
 }
@@ -168,7 +167,7 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
     c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(scene.optimise.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)
     const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
-    const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted.rays);
+    const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted);
     c.error_exported = l1_error(et.histogram, fitted.target);
     c.energy_exported = et.totals.energy();
     c.l1_to_design = l1_error(et.histogram.cells, fitted.histogram.cells, fitted.rays.total);
@@ -283,29 +282,33 @@ inline CompletedDesign finish(const PlannedDesign& plan, DesignResult result, co
     return finish_design(plan.scene, std::move(result), target, setup.callbacks, setup.export_checks);
 }
 
-// A planned design on one replica: the start, the annealing unless setup.start_only, the
-// finish.
-inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignSetup& setup) {
+}  // namespace pipeline_detail
+
+// The design of a scene its caller has planned already (plan_design), to read the plan
+// first: the command line prints the final mesh and checks the memory the levels need
+// before it designs, and plans the scene once for all three. The start surface is the
+// plan's (setup.initial is not read). The start, the annealing unless setup.start_only,
+// the finish.
+inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignSetup& setup = {}) {
     if (setup.callbacks.phase) setup.callbacks.phase(finding_the_start(plan.scene));
     DesignResult result;
     if (setup.start_only) {
-        result = start_only(plan, target);
+        result = pipeline_detail::start_only(plan, target);
     } else {
         SingleReplica single;
-        result = anneal(plan, target, setup, single);
+        result = pipeline_detail::anneal(plan, target, setup, single);
     }
-    return finish(plan, std::move(result), target, setup);
+    return pipeline_detail::finish(plan, std::move(result), target, setup);
 }
-
-}  // namespace pipeline_detail
 
 // Designs `scene` so that its light matches `target` (relative irradiance, any
 // resolution: io::load_target_image makes it from the scene's target block): plans it
 // (plan_design), makes the start, anneals, and finishes the result (finish_design). The
-// one entry point of a design; mpi::design (freeform/mpi/design.hpp) is the same over MPI
-// ranks. Throws InputError for a scene that cannot be designed.
+// one entry point of a design (the overload above is it with the plan made by the
+// caller); mpi::design (freeform/mpi/design.hpp) is the same over MPI ranks. Throws
+// InputError for a scene that cannot be designed.
 inline CompletedDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup = {}) {
-    return pipeline_detail::design(plan_design(scene, setup.initial), target, setup);
+    return design(plan_design(scene, setup.initial), target, setup);
 }
 
 }  // namespace freeform

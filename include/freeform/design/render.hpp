@@ -25,7 +25,7 @@
 
 #include "../core/error.hpp"
 #include "../core/exec.hpp"
-#include "../objective/target.hpp"
+#include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/export.hpp"
@@ -131,11 +131,13 @@ double trace_in_chunks(const Tracer& tracer, const RaySet& rays, int threads, co
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// Traces `rays` through what `job` renders, with the receiver of `sc` (the scene, or its
-// nearest-deposit twin for the cell means). Returns the seconds spent tracing.
-inline double trace_job(const RenderRequest& job, TracerChoice tracer, const Scene& sc, const RaySet& rays,
+// Traces the rays of `setup` through what `job` renders, with the set-up's receiver (the
+// scene's, or its nearest-deposit twin for the cell means); `sc` places the meshes and
+// the light. Returns the seconds spent tracing.
+inline double trace_job(const RenderRequest& job, TracerChoice tracer, const Scene& sc, const TraceSetup& setup,
                         int threads, const RenderCallbacks& callbacks, Histogram& histogram, TraceTotals& totals) {
-    PathParams pp = make_path_params(sc);
+    const RaySet& rays = setup.rays;
+    PathParams pp = setup.params;
     // A mesh is its geometry: flat facets, stored normals unused, unless asked otherwise.
     if (job.mesh && !job.mesh_normals) pp.phong_alpha = 0.0f;
     // A refractive solid is the whole lens: the scene's lens model (its flat back face)
@@ -211,16 +213,16 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
     // fits (optimise.min_rays_per_mesh_cell), so a design's height map renders to its error.
     if (!job.mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, job.surface.nx(), job.surface.ny());
 
-    const RaySet rays = generate_rays(scene.light, job.surface, scene.receiver, scene.optimise.seed);
-    r.rays = rays.size();
+    const TraceSetup setup =
+        make_trace_setup(scene, job.surface, job.target ? &*job.target : nullptr, scene.optimise.seed);
+    r.rays = setup.rays.size();
     r.seconds =
-        render_detail::trace_job(job, r.decision.tracer, scene, rays, r.threads, callbacks, r.histogram, r.totals);
+        render_detail::trace_job(job, r.decision.tracer, scene, setup, r.threads, callbacks, r.histogram, r.totals);
     if (job.target) {
-        r.error = l1_error(r.histogram, make_target(*job.target, scene.receiver.width, scene.receiver.height,
-                                                    target_total(rays, make_path_params(scene))));
+        r.error = l1_error(r.histogram, setup.target);
         r.cells = converged_cell_means(
             scene, job.surface, &*job.target, physical_cell_mean_options(scene.optimise.seed),
-            [&](const Scene& sc, const RaySet& batch, Histogram& h, TraceTotals& tt) {
+            [&](const Scene& sc, const TraceSetup& batch, Histogram& h, TraceTotals& tt) {
                 render_detail::trace_job(job, r.decision.tracer, sc, batch, r.threads, callbacks, h, tt);
             });
     }

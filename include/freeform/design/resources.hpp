@@ -45,16 +45,17 @@ inline double rays_at(const Light& light, double rays_per_cell, double cells) {
 }  // namespace detail
 
 // The plan of a `kind` run of `scene` on `threads` workers (0: count them as 64). The
-// design's levels come from plan_levels; a render traces the light's rays once and, when
-// the scene has a target, the cell means of what it rendered (design/cell_means.hpp).
-inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads) {
+// design's levels are `levels` (plan_levels of the scene, PlannedDesign::levels) or, when
+// null, planned here; a render traces the light's rays once and, when the scene has a
+// target, the cell means of what it rendered (design/cell_means.hpp).
+inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads,
+                                   const std::vector<LevelPlan>* levels = nullptr) {
     const double workers = threads > 0 ? threads : 64;
     const double cells = double(scene.receiver.width) * double(scene.receiver.height);
     ResourcePlan plan;
     double peak_rays = 0, mesh_vertices = double(std::max(scene.surface.nx, 3)) * double(std::max(scene.surface.ny, 3));
     if (kind == RunKind::design) {
-        const std::vector<LevelPlan> levels = plan_levels(scene);
-        for (const LevelPlan& l : levels) {
+        for (const LevelPlan& l : levels ? *levels : plan_levels(scene)) {
             const double level_cells = double(l.resolution_x) * double(l.resolution_y);
             const double per_cell = std::max({scene.light.rays_per_cell, scene.optimise.coarse_rays_per_cell,
                                               fitting_rays_per_cell(scene, l.mesh_x, l.mesh_y)});
@@ -103,8 +104,9 @@ inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads
 
 // Throws InputError when the plan needs more than limits.memory_bytes, naming the
 // largest part (and so the scene key to change).
-inline ResourcePlan check_resources(const Scene& scene, RunKind kind, int threads, const Limits& limits) {
-    const ResourcePlan plan = plan_resources(scene, kind, threads);
+inline ResourcePlan check_resources(const Scene& scene, RunKind kind, int threads, const Limits& limits,
+                                    const std::vector<LevelPlan>* levels = nullptr) {
+    const ResourcePlan plan = plan_resources(scene, kind, threads, levels);
     if (plan.bytes > double(limits.memory_bytes))
         over_limit(std::string(kind == RunKind::design ? "the design" : "the render") + " would need about " +
                        format_bytes(plan.bytes) + " of memory (" + plan.largest +

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "../core/exec.hpp"
-#include "../objective/target.hpp"
+#include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../trace/heightfield.hpp"
@@ -47,14 +47,11 @@ struct SurfaceEvaluation {
 // receiver resolution, with the rays of `seed`.
 inline SurfaceEvaluation evaluate_surface(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
                                           std::uint64_t seed, int threads) {
-    const RaySet rays = generate_rays(scene.light, surface, scene.receiver, seed);
-    const PathParams pp = make_path_params(scene);
-    const HeightfieldTracer tracer(surface, rays, pp);
-    Histogram hist(scene.receiver.width, scene.receiver.height);
+    const TraceSetup setup = make_trace_setup(scene, surface, &target_image, seed);
+    Histogram hist = setup.empty_histogram();
     TraceTotals totals;
-    tracer.trace_all(exec::omp_t{threads}, hist, totals);
-    const Target t = make_target(target_image, scene.receiver.width, scene.receiver.height, target_total(rays, pp));
-    return {l1_error(hist, t), totals.energy()};
+    HeightfieldTracer(surface, setup.rays, setup.params).trace_all(exec::omp_t{threads}, hist, totals);
+    return {l1_error(hist, setup.target), totals.energy()};
 }
 
 inline StartKind requested_start(const Scene& scene) {

@@ -116,16 +116,17 @@ struct ReplicaSetup {
     std::function<void(const RankLayout&)> layout;
 };
 
-// Designs `scene` on the ranks of `comm`, one replica per rank (see the top of this file).
-// Throws InputError, on every rank, for a scene or options that cannot be designed.
-inline ReplicaDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup, MPI_Comm comm,
+// Designs a planned scene (plan_design, the same on every rank) on the ranks of `comm`,
+// one replica per rank (see the top of this file); setup.initial is not read (the plan
+// holds the start surface). Throws InputError, on every rank, for options that cannot
+// be designed.
+inline ReplicaDesign design(PlannedDesign plan, const ImageD& target, const DesignSetup& setup, MPI_Comm comm,
                             const ReplicaSetup& replica_setup = {}) {
-    PlannedDesign plan = plan_design(scene, setup.initial);
     int rank = 0;
     detail::check(MPI_Comm_rank(comm, &rank), "MPI_Comm_rank");
     ReplicaDesign out;
     if (setup.start_only) {
-        if (rank == 0) out.design = pipeline_detail::design(std::move(plan), target, setup);
+        if (rank == 0) out.design = freeform::design(std::move(plan), target, setup);
         return out;
     }
     Replicas replicas(comm, plan.scene.optimise.seed, replica_setup.options);
@@ -150,6 +151,13 @@ inline ReplicaDesign design(const Scene& scene, const ImageD& target, const Desi
     // Rank 0 alone finishes the winner's design.
     if (rank == 0) out.design = pipeline_detail::finish(plan, std::move(result), target, setup);
     return out;
+}
+
+// Designs `scene` on the ranks of `comm`: plans it (plan_design) and designs the plan.
+// Throws InputError, on every rank, for a scene or options that cannot be designed.
+inline ReplicaDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup, MPI_Comm comm,
+                            const ReplicaSetup& replica_setup = {}) {
+    return design(plan_design(scene, setup.initial), target, setup, comm, replica_setup);
 }
 
 // metrics.json's "replicas" block: how the ranks shared the design (rank 0's report).
