@@ -1,0 +1,187 @@
+#!/usr/bin/env python3
+"""How a design's cost grows with the receiver's resolution (issue 34, part 4).
+
+Designs one photograph (matplotlib's Grace Hopper sample, centre-cropped square and
+resampled to R x R) as a mirror in the camera example's geometry (10 cm mirror, 20 cm
+receiver 0.5 m away, collimated light, mesh "auto", 16 rays per cell and the default
+floor of 32 per mesh cell) for each receiver size R, at one time budget, and records:
+
+  moves/s     iterations per second of the final level's stages (annealing only)
+  level s     seconds per level (start, each annealed level, the finish)
+  memory      the process's peak resident memory (GNU time's maximum RSS)
+  error       error_physical, the exported part's cell-mean error (docs/measures.md)
+
+Usage (from the repository root, after a release build):
+
+  /usr/bin/python3 benchmarks/scale/scale.py --bin build/release/bin/freeform \\
+      [--sizes 200,400,512,1024] [--budget 60] [--threads 2] [--out benchmarks/results/scale]
+
+It writes scale.csv, scale.json and scale.png (the four figures against R) into --out,
+and keeps each design's metrics.json and comparison.png under --out/runs/R/. A device
+column is for a GPU design path (`--device cuda`, not built yet): the chart shows the CPU
+alone until one exists. Timing needs an idle machine.
+"""
+import argparse
+import csv
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+HOPPER = Path("/usr/share/matplotlib/mpl-data/sample_data/grace_hopper.jpg")
+
+
+def target_png(size: int, out: Path) -> Path:
+    from PIL import Image
+    img = Image.open(HOPPER).convert("L")
+    w, h = img.size
+    s = min(w, h)
+    img = img.crop(((w - s) // 2, (h - s) // 2, (w - s) // 2 + s, (h - s) // 2 + s))
+    img = img.resize((size, size), Image.LANCZOS)
+    p = out / f"hopper-{size}.png"
+    img.save(p)
+    return p
+
+
+def scene_for(size: int, target: Path, budget: float) -> dict:
+    return {
+        "name": f"scale-{size}",
+        "description": f"Grace Hopper on a {size} x {size} receiver (benchmarks/scale/scale.py)",
+        "light": {"type": "collimated", "direction": [0, 0, -1], "rays_per_cell": 16},
+        "surface": {"material": "mirror", "center": [0, 0, 0], "normal": [0, 0, 1], "up": [0, 1, 0],
+                    "size": [0.1, 0.1], "mesh": "auto", "height_bounds": [-0.005, 0.005], "aperture": "rect"},
+        "receiver": {"center": [0, 0, 0.5], "normal": [0, 0, -1], "up": [0, 1, 0], "size": [0.2, 0.2],
+                     "resolution": [size, size]},
+        "target": {"image": str(target.resolve())},
+        "optimise": {"time_budget": budget, "seed": 1},
+    }
+
+
+def run_one(binary: str, size: int, budget: float, threads: int, out: Path) -> dict:
+    run_dir = out / "runs" / str(size)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    scene = run_dir / "scene.json"
+    scene.write_text(json.dumps(scene_for(size, target_png(size, run_dir), budget), indent=1))
+    design = run_dir / "design"
+    cmd = ["/usr/bin/time", "-v", binary, "design", str(scene), "--out", str(design), "--threads", str(threads),
+           "--quiet"]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    (run_dir / "log.txt").write_text(p.stdout + p.stderr)
+    if p.returncode != 0:
+        sys.exit(f"scale: the {size} design failed (exit {p.returncode}); see {run_dir / 'log.txt'}")
+    rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", p.stderr).group(1))
+    wall = re.search(r"Elapsed \(wall clock\) time.*: (\S+)", p.stderr).group(1)
+    parts = [float(x) for x in wall.split(":")]
+    wall_s = sum(v * 60 ** (len(parts) - 1 - k) for k, v in enumerate(parts))
+    m = json.loads((design / "metrics.json").read_text())
+    stages = m["levels"]
+    last = max(s["level"] for s in stages) if stages else -1
+    final = [s for s in stages if s["level"] == last]
+    it, sec = sum(s["iterations"] for s in final), sum(s["seconds"] for s in final)
+    # Seconds of each annealed level, coarsest first ({mesh: seconds}, in order).
+    per_level = {}
+    for s in sorted(stages, key=lambda s: s["level"]):
+        key = f"{s['mesh'][0]}x{s['mesh'][1]}"
+        per_level[key] = per_level.get(key, 0.0) + s["seconds"]
+    return {
+        "receiver": size,
+        "mesh": m["mesh"],
+        "rays": m["rays"],
+        "moves_per_second_final_level": it / sec if sec > 0 else 0.0,
+        "iterations": m["iterations"],
+        "start_seconds": m["start"].get("seconds", 0.0),
+        "level_seconds": per_level,
+        "design_seconds": m["seconds"],
+        "finish_seconds": m["finish_seconds"],
+        "wall_seconds": wall_s,
+        "peak_memory_gib": rss_kb / 2 ** 20,
+        "error_physical": m.get("error_physical"),
+        "error": m["error"],
+        "device": "cpu",
+        "threads": threads,
+        "budget": budget,
+    }
+
+
+def chart(rows: list, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    r = [row["receiver"] for row in rows]
+    fig, ax = plt.subplots(2, 2, figsize=(10, 7.5))
+    ax[0][0].plot(r, [row["moves_per_second_final_level"] for row in rows], "o-", label="CPU, 2 cores")
+    ax[0][0].set_ylabel("moves / s (final level)")
+    ax[0][0].set_yscale("log")
+    # One bar per design: the start, each annealed level (finest last), the finish (the
+    # final traces, the export and its cell means) and the rest of the wall time (writing
+    # the files, the process itself).
+    x = list(range(len(r)))
+    bottom = [0.0] * len(r)
+
+    def stack(values, label, colour=None):
+        ax[0][1].bar(x, values, bottom=bottom, label=label, color=colour)
+        for k, v in enumerate(values):
+            bottom[k] += v
+
+    stack([row["start_seconds"] for row in rows], "start (transport)", "tab:blue")
+    depth = max(len(row["level_seconds"]) for row in rows)
+    shades = ["#fdd49e", "#fc8d59", "#d7301f"]
+    for k in range(depth):
+        # Level k counted from the finest, so that every design's final level has one colour.
+        stack([list(row["level_seconds"].values())[::-1][depth - 1 - k]
+               if depth - 1 - k < len(row["level_seconds"]) else 0.0 for row in rows],
+              "final level" if k == depth - 1 else f"level final-{depth - 1 - k}", shades[k - depth + 3])
+    stack([row["finish_seconds"] for row in rows], "finish (traces, export, cell means)", "tab:green")
+    stack([max(0.0, row["wall_seconds"] - row["design_seconds"] - row["finish_seconds"]) for row in rows],
+          "writing files, process", "tab:grey")
+    ax[0][1].set_xticks(list(x), [str(v) for v in r])
+    ax[0][1].set_ylabel("seconds")
+    ax[0][1].legend(fontsize=8)
+    ax[1][0].plot(r, [row["peak_memory_gib"] for row in rows], "o-")
+    ax[1][0].set_ylabel("peak memory (GiB)")
+    ax[1][1].plot(r, [row["error_physical"] for row in rows], "o-")
+    ax[1][1].set_ylabel("error_physical at equal time")
+    for a in (ax[0][0], ax[1][0], ax[1][1]):
+        a.set_xlabel("receiver (pixels per side)")
+        a.set_xticks(r)
+        a.grid(alpha=0.3)
+    ax[0][1].set_xlabel("receiver (pixels per side)")
+    budget = rows[0]["budget"]
+    fig.suptitle(f"Cost against resolution: Grace Hopper as a mirror, {budget:g} s budget, CPU "
+                 f"({rows[0]['threads']} threads); no GPU design path yet")
+    fig.tight_layout()
+    fig.savefig(out / "scale.png", dpi=110)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--bin", default="build/release/bin/freeform")
+    ap.add_argument("--sizes", default="200,400,512,1024")
+    ap.add_argument("--budget", type=float, default=60)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--out", default="benchmarks/results/scale")
+    a = ap.parse_args()
+    if not HOPPER.exists():
+        sys.exit(f"scale: {HOPPER} is missing (Debian's python3-matplotlib ships it)")
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for size in [int(s) for s in a.sizes.split(",")]:
+        print(f"scale: {size} x {size} ...", flush=True)
+        rows.append(run_one(a.bin, size, a.budget, a.threads, out))
+        print(f"  mesh {rows[-1]['mesh']}, {rows[-1]['moves_per_second_final_level']:.0f} moves/s, "
+              f"{rows[-1]['peak_memory_gib']:.2f} GiB, error_physical {rows[-1]['error_physical']}", flush=True)
+    (out / "scale.json").write_text(json.dumps(rows, indent=1))
+    with open(out / "scale.csv", "w", newline="") as f:
+        keys = [k for k in rows[0] if k != "level_seconds"]
+        w = csv.DictWriter(f, fieldnames=keys + ["level_seconds"])
+        w.writeheader()
+        for row in rows:
+            w.writerow({**{k: row[k] for k in keys}, "level_seconds": json.dumps(row["level_seconds"])})
+    chart(rows, out)
+    print(f"scale: {out / 'scale.csv'}, {out / 'scale.png'}")
+
+
+if __name__ == "__main__":
+    main()
