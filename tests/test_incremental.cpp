@@ -295,10 +295,10 @@ TEST_CASE("maintained histogram and objective equal a full recompute after 10,00
         CAPTURE(c.name);
         Setup s = make_setup(c);
         SurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                 make_bandit("history", 7), 1e-4, 1.0);
+                                 make_bandit(BanditKind::history, 7), 1e-4, 1.0);
         check_problem(problem, [&] {
             SurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                   make_bandit("history", 7), 1e-4, 1.0);
+                                   make_bandit(BanditKind::history, 7), 1e-4, 1.0);
             return fresh.value();
         });
         const Traced full = trace_scene(s.scene, s.hm, s.rays);
@@ -344,16 +344,16 @@ TEST_CASE("a problem built on the trace of the one before it follows a rebuilt o
     for (const Case& c : cases()) {
         CAPTURE(c.name);
         Setup s = make_setup(c);
-        SurfaceProblem first(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("history", 7),
+        SurfaceProblem first(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit(BanditKind::history, 7),
                              1e-4, 1.0);
         same_moves(5, 1500, first);
         IncrementalTrace handed = first.take_trace();
         Heightmap copy = s.hm;
         const ProposalSettings next = proposals();
-        SurfaceProblem reused(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+        SurfaceProblem reused(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit(BanditKind::uniform, 7), 1e-4,
                               1.0, {}, &handed);
         CHECK(handed.records().empty());  // moved in, not traced again
-        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit(BanditKind::uniform, 7), 1e-4,
                                1.0);
         CHECK(reused.value().total == rebuilt.value().total);
         CHECK(reused.histogram() == rebuilt.histogram());
@@ -363,7 +363,7 @@ TEST_CASE("a problem built on the trace of the one before it follows a rebuilt o
         // A trace of another surface is not taken: that problem traces its rays itself.
         IncrementalTrace other = rebuilt.take_trace();
         const std::size_t records = other.records().size();
-        SurfaceProblem elsewhere(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit("uniform", 7), 1e-4,
+        SurfaceProblem elsewhere(s.hm, s.rays, s.pp, s.target, {}, s.penalties, next, make_bandit(BanditKind::uniform, 7), 1e-4,
                                  1.0, {}, &other);
         CHECK(other.records().size() == records);
         CHECK(elsewhere.histogram() == reused.histogram());
@@ -381,7 +381,7 @@ TEST_CASE("an Embree problem annealed with speculative windows on 2 threads foll
         Setup s = make_setup(c);
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
         EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                       make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
+                                       make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
         AnnealOptions o;
         o.seed = 11;
         o.max_iterations = 400;
@@ -405,11 +405,11 @@ TEST_CASE("the Embree backend keeps the same invariant, refitting only touched t
         Setup s = make_setup(c);
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
         EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                       make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
+                                       make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
         check_problem(problem, [&] {
             EmbreeTracer t2(s.hm, s.rays, s.pp, {}, 8);
             EmbreeSurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                         make_bandit("history", 7), 1e-4, 1.0, EmbreeBackend{&t2, &s.hm});
+                                         make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&t2, &s.hm});
             return fresh.value();
         });
         // Against a fresh Embree full trace of the final surface.
@@ -430,9 +430,9 @@ TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's re
         Setup s = make_setup(all.front());
         ProposalSettings ps = proposals();
         ps.error_guided = guided;
-        SurfaceProblem strip(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
-        SurfaceProblem whole(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
-        SurfaceProblem plain(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit("uniform", 7), 1e-4, 1.0);
+        SurfaceProblem strip(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit(BanditKind::uniform, 7), 1e-4, 1.0);
+        SurfaceProblem whole(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit(BanditKind::uniform, 7), 1e-4, 1.0);
+        SurfaceProblem plain(s.hm, s.rays, s.pp, s.target, {}, s.penalties, ps, make_bandit(BanditKind::uniform, 7), 1e-4, 1.0);
         strip.set_centre_rows(10, 20);
         whole.set_centre_rows(0, s.hm.ny());
         const int reach = 5 / 2;  // default_kernel_bank(5): 5 × 5 vertices around the centre
@@ -466,7 +466,7 @@ TEST_CASE("heights put back inside a small box are applied like a move: the prob
     for (const Case& c : cases()) {
         CAPTURE(c.name);
         Setup s = make_setup(c);
-        SurfaceProblem kept(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("uniform", 7),
+        SurfaceProblem kept(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit(BanditKind::uniform, 7),
                             1e-4, 1.0);
         same_moves(5, 400, kept);
         // A bump inside a 5 x 4 box of vertices: the small-box path.
@@ -479,7 +479,7 @@ TEST_CASE("heights put back inside a small box are applied like a move: the prob
         kept.replace_heights(bumped);
         CHECK(kept.histogram() != histogram_before);  // the bump moved some light
         Heightmap copy = s.hm;
-        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit("uniform", 7),
+        SurfaceProblem rebuilt(copy, s.rays, s.pp, s.target, {}, s.penalties, proposals(), make_bandit(BanditKind::uniform, 7),
                                1e-4, 1.0);
         CHECK(s.hm.heights() == bumped);
         CHECK(kept.value().total == rebuilt.value().total);

@@ -8,7 +8,7 @@
 #include <freeform/io.hpp>
 #include <freeform/io/scene_file.hpp>
 #include <freeform/io/staged_output.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 
 #include <cstdint>
 #include <cstring>

@@ -13,7 +13,7 @@
 #include <freeform/design/machining.hpp>
 #include <freeform/design/designer.hpp>
 #include <freeform/objective/penalty.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 #include <freeform/surface/tool.hpp>
 #include <freeform/design/start.hpp>
 #include <freeform/surface/export.hpp>

@@ -1,4 +1,4 @@
-// Scene files: parsing and validation (scene/json.hpp), file loading and the initial
+// Scene files: parsing and validation (io/scene_json.hpp), file loading and the initial
 // surface (io/scene_file.hpp).
 #include <cmath>
 #include <cstdint>
@@ -12,7 +12,7 @@
 #include <doctest/doctest.h>
 #include <freeform/io/pfm.hpp>
 #include <freeform/io/scene_file.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 
 using nlohmann::json;
 namespace fs = std::filesystem;
@@ -308,6 +308,7 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
         {"negative seed", {{"optimise", {{"seed", -1}}}}, "optimise.seed: ", ">= 0"},
         {"fractional seed", {{"optimise", {{"seed", 1.5}}}}, "optimise.seed: ", "expected an integer"},
         {"zero budget", {{"optimise", {{"time_budget", 0}}}}, "optimise.time_budget: ", "> 0"},
+        {"unknown bandit", {{"optimise", {{"bandit", "greedy"}}}}, "optimise.bandit: ", "\"history\""},
         {"target error 1", {{"optimise", {{"target_error", 1}}}}, "optimise.target_error: ", "[0, 1)"},
         {"negative threads", {{"optimise", {{"threads", -2}}}}, "optimise.threads: ", "in [0, 65536], got -2"},
         {"unknown optimise key",

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <vector>
 
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 
 #include "support.hpp"
 

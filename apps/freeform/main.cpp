@@ -39,7 +39,7 @@
 #include <freeform/freeform.hpp>
 #include <freeform/io/forms.hpp>
 #include <freeform/io/outputs.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
 
@@ -479,7 +479,12 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
 // The replica options of the command line (freeform_mpi only).
 mpi::ReplicaOptions replica_options(const DesignArgs& a) {
     mpi::ReplicaOptions o;
-    o.mode = mpi::parse_replica_mode(a.replica_mode, "--replica-mode");
+    // The mode's name is read here, at the command line (the library takes the enum).
+    if (const std::optional<mpi::ReplicaMode> mode = enum_value(a.replica_mode, mpi::replica_mode_names))
+        o.mode = *mode;
+    else
+        throw InputError("--replica-mode: expected " + enum_list(mpi::replica_mode_names, "\"", " or ") +
+                         ", got \"" + a.replica_mode + "\"");
     o.ladder_ratio = a.ladder_ratio;
     o.exchange_every = a.exchange_every;
     o.merge_coverage = a.merge_coverage;

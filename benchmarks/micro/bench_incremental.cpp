@@ -127,7 +127,7 @@ void incremental(benchmark::State& state) {
     const int speculative = int(state.range(3)), threads = int(state.range(4));
     Bench b(mesh, resolution);
     SurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
-                             make_bandit("uniform", 7), b.unit(), 1.0);
+                             make_bandit(BanditKind::uniform, 7), b.unit(), 1.0);
     const double rays = rays_per_move(problem);
     run_annealer(state, problem, speculative, threads, 2000);
     state.counters["rays_per_move"] = rays;
@@ -188,7 +188,7 @@ void embree_incremental(benchmark::State& state) {
     Bench b(mesh, resolution);
     EmbreeTracer tracer(b.surface, b.rays, b.params);
     EmbreeSurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
-                                   make_bandit("uniform", 7), b.unit(), 1.0, EmbreeBackend{&tracer, &b.surface});
+                                   make_bandit(BanditKind::uniform, 7), b.unit(), 1.0, EmbreeBackend{&tracer, &b.surface});
     const double rays = rays_per_move(problem);
     run_annealer(state, problem, 1, 1, 300);
     state.counters["rays_per_move"] = rays;

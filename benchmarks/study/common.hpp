@@ -32,7 +32,7 @@
 #include <freeform/objective/image_terms.hpp>
 #include <freeform/objective/objective.hpp>
 #include <freeform/objective/target.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/setup.hpp>
 #if defined(FREEFORM_WITH_EMBREE)

@@ -13,6 +13,7 @@
 #include "io/sag.hpp"
 #include "io/report_json.hpp"
 #include "io/scene_file.hpp"
+#include "io/scene_json.hpp"
 #include "io/staged_output.hpp"
 #include "io/target.hpp"
 // Not included here, because with freeform::step they bring in Open CASCADE's headers

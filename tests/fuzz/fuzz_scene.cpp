@@ -15,7 +15,7 @@
 #include <freeform/core/error.hpp>
 #include <freeform/design/resources.hpp>
 #include <freeform/io/scene_file.hpp>
-#include <freeform/scene/json.hpp>
+#include <freeform/io/scene_json.hpp>
 #include <nlohmann/json.hpp>
 
 #include "fuzz_common.hpp"

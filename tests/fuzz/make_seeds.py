@@ -192,7 +192,7 @@ def dicts():
     d = HERE / "dict"
     d.mkdir(exist_ok=True)
     # Every quoted word of the scene schema (keys and enum values), as JSON strings.
-    schema = (ROOT / "include/freeform/scene/json.hpp").read_text()
+    schema = (ROOT / "include/freeform/io/scene_json.hpp").read_text()
     words = sorted(set(re.findall(r'"([a-z][a-z0-9_]*)"', schema)))
     scene = [f'"{w}"' for w in words] + ["{", "}", "[", "]", ":", ",", "true", "false", "null", "-1e308",
                                           "1e-320", "0.5", "//", "/*", "*/"]

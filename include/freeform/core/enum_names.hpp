@@ -1,7 +1,7 @@
 #pragma once
 // The names of an enumeration's values: one table per enum, defined next to the enum
 // (core/deposit.hpp, core/material.hpp, surface/heightmap.hpp, scene/light.hpp,
-// scene/scene.hpp). The scene reader (scene/json.hpp), the command line and the reports
+// scene/scene.hpp). The scene reader (io/scene_json.hpp), the command line and the reports
 // look names up in it and print its list in their messages, so a name is spelt once.
 #include <array>
 #include <cstddef>

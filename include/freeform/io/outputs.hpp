@@ -21,7 +21,7 @@
 #include "../design/pipeline.hpp"
 #include "../design/render.hpp"
 #include "../objective/target.hpp"
-#include "../scene/json.hpp"
+#include "scene_json.hpp"
 #include "../scene/scene.hpp"
 #include "../trace/select.hpp"
 #include "file.hpp"

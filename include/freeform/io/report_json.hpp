@@ -14,7 +14,7 @@
 
 #include "../design/designer.hpp"
 #include "../design/pipeline.hpp"
-#include "../scene/json.hpp"
+#include "scene_json.hpp"
 #include "form_check.hpp"
 
 namespace freeform::io {

@@ -1,5 +1,5 @@
 #pragma once
-// Scene files: reading a JSON scene from disk (scene/json.hpp does the validation),
+// Scene files: reading a JSON scene from disk (io/scene_json.hpp does the validation),
 // checking that the files it names exist, and building the initial surface it asks for.
 #include <cmath>
 #include <cstddef>
@@ -15,7 +15,7 @@
 #include "../core/error.hpp"
 #include "../core/limits.hpp"
 #include "../design/initial.hpp"
-#include "../scene/json.hpp"
+#include "scene_json.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
 #include "file.hpp"

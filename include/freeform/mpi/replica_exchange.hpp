@@ -123,10 +123,6 @@ inline constexpr std::array<EnumName<ReplicaMode>, 2> replica_mode_names{
 
 inline std::string_view to_string(ReplicaMode m) { return enum_name(m, replica_mode_names); }
 
-inline ReplicaMode parse_replica_mode(const std::string& s, const std::string& what) {
-    if (const std::optional<ReplicaMode> m = enum_value(s, replica_mode_names)) return *m;
-    throw InputError(what + ": expected " + enum_list(replica_mode_names, "\"", " or ") + ", got \"" + s + "\"");
-}
 
 // The default is domains: at equal cores and wall time it beat one rank on every case
 // measured, where tempering lost (docs/performance.md, "MPI: ranks against threads"; how

@@ -509,15 +509,6 @@ inline AnyBandit make_bandit(BanditKind kind, int arms, int sync_interval = 64) 
     throw InputError("unknown bandit kind " + std::to_string(int(kind)));
 }
 
-// ... from its name (bandit_kind_names, scene/scene.hpp); `key` names the option in errors.
-inline AnyBandit make_bandit(std::string_view name, int arms, int sync_interval = 64,
-                             std::string_view key = "bandit") {
-    if (const std::optional<BanditKind> kind = enum_value(name, bandit_kind_names))
-        return make_bandit(*kind, arms, sync_interval);
-    throw InputError(std::string(key) + ": unknown bandit '" + std::string(name) + "' (known: " +
-                     enum_list(bandit_kind_names) + ")");
-}
-
 static_assert(check_bandit<UniformBandit>());
 static_assert(check_bandit<HistoryBandit>());
 static_assert(check_bandit<Ucb1Bandit>());

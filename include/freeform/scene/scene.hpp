@@ -95,7 +95,7 @@ enum class KernelShapes { bank, isotropic };
 enum class BanditKind { uniform, history, ucb1, discounted_ucb };
 
 // Their names in scene files and reports: the one mapping between the strings and the
-// values (scene/json.hpp reads and writes with it).
+// values (io/scene_json.hpp reads and writes with it).
 inline constexpr std::array<EnumName<EvaluationMode>, 2> evaluation_names{
     {{"incremental", EvaluationMode::incremental}, {"full", EvaluationMode::full}}};
 inline constexpr std::array<EnumName<KernelShapes>, 2> kernel_shape_names{

@@ -32,7 +32,7 @@
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../core/frame.hpp"
-#include "scene.hpp"
+#include "../scene/scene.hpp"
 
 namespace freeform {
 
