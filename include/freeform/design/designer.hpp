@@ -533,7 +533,8 @@ struct LevelSetup {
 
 // What the parts of one design share: what it was given, fixed for the run, and what it
 // has made so far. Each part below owns one step, and Designer runs them in order:
-//   make_level_setup      a level's receiver, light, rays, target and held-out check
+//   make_level_setup      a level's receiver, light, rays and target
+//   add_held_out          its held-out check
 //   unaffordable_level    whether a timed level can afford to build its trace
 //   make_problem          the problem a stage anneals (the level's trace passed on)
 //   preprocess            the history bandit's pre-process (the first stage only)
@@ -581,7 +582,10 @@ struct DesignState {
     }
 };
 
-// Level li's set-up on the design's surface (refined to the level's mesh already).
+// Level li's set-up on the design's surface (refined to the level's mesh already), but for
+// its held-out check (add_held_out): a level the time budget cannot afford is judged on
+// the final mesh instead (evaluate_on_final_mesh), and its held-out rays would be made
+// for nothing (at 1024^2, 33 million rays and their target).
 template <class State>
 LevelSetup make_level_setup(const State& d, std::size_t li) {
     LevelSetup L;
@@ -593,15 +597,20 @@ LevelSetup make_level_setup(const State& d, std::size_t li) {
     L.light = d.scene.light;
     if (li + 1 < d.levels.size() && d.options.coarse_rays_per_cell > 0 && L.light.rays == 0)
         L.light.rays_per_cell = std::min(L.light.rays_per_cell, d.options.coarse_rays_per_cell);
-    const auto setup = [&](std::uint64_t seed) {
-        return make_trace_setup(d.scene, L.light, L.receiver, d.surface, &d.target_image, seed);
-    };
-    L.trace_setup = setup(d.options.seed);
+    L.trace_setup = make_trace_setup(d.scene, L.light, L.receiver, d.surface, &d.target_image, d.options.seed);
     L.unit = amplitude_unit(d.scene, L.receiver, d.surface);
-    if (d.options.held_out_checks)
-        L.held_out.emplace(setup(HeldOutCheck::seed_for(d.options.seed, li)), d.weights, d.penalties, d.threads);
     L.stages = L.plan->kernel_supports.empty() ? 1 : L.plan->kernel_supports.size();
     return L;
+}
+
+// The level's held-out check (optimise.held_out_checks): its light and receiver, rays of
+// another jitter.
+template <class State>
+void add_held_out(const State& d, LevelSetup& L) {
+    if (!d.options.held_out_checks) return;
+    const std::uint64_t seed = HeldOutCheck::seed_for(d.options.seed, L.index);
+    L.held_out.emplace(make_trace_setup(d.scene, L.light, L.receiver, d.surface, &d.target_image, seed), d.weights,
+                       d.penalties, d.threads);
 }
 
 // A time-budgeted level is annealed only when building its trace (the first problem's
@@ -1036,6 +1045,7 @@ class Designer {
                 return;
             }
         }
+        add_held_out(d_, L);
         for (std::size_t si = 0; si < L.stages && !d_.stop; ++si) run_stage<Backend>(d_, L, si);
         d_.share_used += plan.time_share;
         if (d_.stop && li + 1 < d_.levels.size()) evaluate_on_final_mesh(d_);
