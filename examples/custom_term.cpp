@@ -72,17 +72,18 @@ int main(int argc, char** argv) {
         t.margin = 0.15;
         scene.target = t;
         const ImageD target = io::load_target_image(scene);
-        scene.optimise.max_iterations = iterations;  // a fixed budget: the same result on any machine
-        scene.optimise.time_budget = 600;
+        DesignOptions options;
+        options.max_iterations = iterations;  // a fixed budget: the same result on any machine
+        options.time_budget = 600;
 
         const FlatRimTerm rim;
         for (const bool with_term : {false, true}) {
             // The terms the options ask for, and the rim's added to them.
-            Penalties penalties = default_penalties(scene.optimise, scene.surface.tool_radius);
+            Penalties penalties = default_penalties(options.penalties, scene.surface.tool_radius);
             if (with_term) penalties.add(rim, 0.05);
             DesignSetup setup;
             setup.penalties = penalties;
-            const CompletedDesign d = design(scene, target, setup);
+            const CompletedDesign d = design(DesignJob{scene, options}, target, setup);
             std::printf("%-17s error %.3f, energy %.3f, rim RMS height %6.1f um\n",
                         with_term ? "with flat_rim:" : "without the term:", d.fitted.error, d.fitted.totals.energy(),
                         rim_rms_um(d.result.surface, rim.width));

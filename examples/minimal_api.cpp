@@ -18,8 +18,10 @@ int main(int argc, char** argv) try {
     std::filesystem::create_directories(out);  // before the design: fail early on a bad path
 
     // 1. The scene: light falling straight down on a 10 cm mirror at the origin, and a
-    //    20 cm screen 0.5 m above it looking down (it does not block the light).
-    Scene scene;
+    //    20 cm screen 0.5 m above it looking down (it does not block the light). A job
+    //    is the scene and the design's options (a scene file's "optimise" block).
+    DesignJob job;
+    Scene& scene = job.scene;
     scene.light.shape = CollimatedLight{{0, 0, -1}};
     scene.light.rays_per_cell = 16;  // rays per receiver cell: fixes the noise per pixel
     scene.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
@@ -40,8 +42,8 @@ int main(int argc, char** argv) try {
     // 3. Design: the transport start, annealing, the part exported and judged. A time
     //    budget bounds the run; set max_iterations as well for a run that does not depend
     //    on the machine's speed.
-    scene.optimise.time_budget = 10;
-    scene.optimise.progress_every = 20000;
+    job.options.time_budget = 10;
+    job.options.progress_every = 20000;
     DesignSetup setup;
     setup.callbacks.progress = [](const DesignProgress& p) {
         std::printf("level %d/%d (mesh %3d, %3d px) kernel %2d  iteration %6lld  error %.4f  energy %.4f\n",
@@ -49,7 +51,7 @@ int main(int argc, char** argv) try {
                     p.error, p.energy);
         return false;  // true would stop the design (the best state so far is finished and returned)
     };
-    const CompletedDesign d = design(scene, target, setup);
+    const CompletedDesign d = design(job, target, setup);
 
     // 4. Save (heightmap.pfm: image row 0 is the +v edge, io/heightmap.hpp).
     io::write_heightmap(out / "heightmap.pfm", d.result.surface);

@@ -72,16 +72,17 @@ std::string type_name(const py::handle& obj) { return py::str(py::type::handle_o
 
 // --------------------------------------------------------------------------- scene
 
-// A scene and the file it came from (metrics.json's "scene"; empty for a dict or text).
+// A scene file's scene and design options (its "optimise" block), and the file it came
+// from (metrics.json's "scene"; empty for a dict or text).
 struct PyScene {
-    freeform::Scene scene;
+    freeform::DesignJob job;
     std::optional<std::string> path;
 
     // The name errors begin with, as the command line names the file it read.
     std::string name() const { return path ? *path : std::string("scene"); }
 };
 
-PyScene load_scene(const fs::path& file) { return PyScene{freeform::io::load_scene(file), file.string()}; }
+PyScene load_scene(const fs::path& file) { return PyScene{freeform::io::load_job(file), file.string()}; }
 
 // Python's json module writes the dict; NumPy numbers and arrays become plain numbers and lists.
 std::string json_text(const py::handle& data) {
@@ -104,9 +105,9 @@ PyScene scene_from_json(const py::object& data, std::optional<fs::path> base_dir
         throw py::type_error("Scene.from_json: expected a dict or the text of a scene (str), got " + type_name(data));
     std::error_code ec;
     const fs::path base = base_dir ? *base_dir : fs::current_path(ec);
-    PyScene s{freeform::io::parse_scene(text, "scene", base), std::nullopt};
+    PyScene s{freeform::io::parse_job(text, "scene", base), std::nullopt};
     try {
-        freeform::io::check_scene_files(s.scene);
+        freeform::io::check_scene_files(s.job.scene);
     } catch (const freeform::IoError& e) {
         throw freeform::IoError("scene: " + std::string(e.what()));
     }
@@ -360,21 +361,23 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
         throw py::type_error("progress: expected a function progress(iteration, seconds, error) or None, got " +
                              type_name(progress));
-    freeform::Scene scene = ps.scene;
+    freeform::DesignJob job = ps.job;
+    freeform::Scene& scene = job.scene;
+    freeform::DesignOptions& options = job.options;
     if (seed) {
         if (*seed < 0) throw freeform::InputError("seed: must be >= 0, got " + std::to_string(*seed));
-        scene.optimise.seed = std::uint64_t(*seed);
+        options.seed = std::uint64_t(*seed);
     }
     if (time_budget) {
         if (!(*time_budget > 0) || !std::isfinite(*time_budget))
             throw freeform::InputError("time_budget: must be > 0 seconds (and finite)");
-        scene.optimise.time_budget = *time_budget;
+        options.time_budget = *time_budget;
     }
     if (threads) {
         if (*threads < 0 || *threads > 65536)
             throw freeform::InputError("threads: must be in [0, 65536] (0 = all cores), got " +
                                        std::to_string(*threads));
-        scene.optimise.threads = *threads;
+        options.threads = *threads;
     }
     std::optional<freeform::ImageD> target;
     if (!target_arg.is_none()) {
@@ -386,17 +389,17 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     } catch (const freeform::InputError& e) {
         throw freeform::InputError(ps.name() + ": " + e.what());
     }
-    scene.optimise.progress_every = 500;  // as the command line's: the same convergence.csv
+    options.progress_every = 500;  // as the command line's: the same convergence.csv
     const freeform::Limits limits;
     // Planned once, as the command line does: the memory check (before any surface is
     // made) and the design read the same levels.
-    std::vector<freeform::LevelPlan> levels = freeform::plan_levels(scene);
-    freeform::check_resources(scene, freeform::RunKind::design,
-                              freeform::thread_count(freeform::exec::omp_t{scene.optimise.threads}), limits, &levels);
+    std::vector<freeform::LevelPlan> levels = freeform::plan_levels(scene, options);
+    freeform::check_resources(job, freeform::RunKind::design,
+                              freeform::thread_count(freeform::exec::omp_t{options.threads}), limits, &levels);
     if (!target) target = freeform::io::load_target_image(scene, limits);
-    const std::vector<freeform::ExportFormat> formats = freeform::io::export_formats(scene);
-    freeform::PlannedDesign plan =
-        freeform::plan_design(scene, freeform::io::load_start_surface(scene, limits), std::move(levels));
+    const std::vector<freeform::ExportFormat> formats = freeform::io::export_formats(options.exports);
+    std::optional<freeform::Heightmap> start = freeform::io::load_start_surface(scene, levels, limits);
+    freeform::PlannedDesign plan = freeform::plan_design(job, std::move(start), std::move(levels));
     freeform::DesignSetup setup;
 
     ProgressState state;
@@ -445,17 +448,19 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
 py::tuple render(const PyScene& ps, const py::object& heightmap, const py::object& mesh, const py::object& target_arg,
                  std::optional<std::int64_t> seed, std::optional<int> threads) {
     freeform::RenderRequest job;
-    job.scene = ps.scene;
-    freeform::Scene& scene = job.scene;
+    freeform::DesignJob scene_file = ps.job;
     if (seed) {
         if (*seed < 0) throw freeform::InputError("seed: must be >= 0, got " + std::to_string(*seed));
-        scene.optimise.seed = std::uint64_t(*seed);
+        scene_file.options.seed = std::uint64_t(*seed);
     }
+    job.scene = scene_file.scene;
+    job.options = scene_file.options;
+    freeform::Scene& scene = job.scene;
     if (threads && (*threads < 0 || *threads > 65536))
         throw freeform::InputError("threads: must be in [0, 65536] (0 = all cores), got " + std::to_string(*threads));
     job.threads = freeform::thread_count(freeform::exec::omp_t{threads.value_or(0)});
     const freeform::Limits limits;
-    freeform::check_resources(scene, freeform::RunKind::render, job.threads, limits);
+    freeform::check_resources(scene_file, freeform::RunKind::render, job.threads, limits);
     if (!heightmap.is_none() && !mesh.is_none())
         throw freeform::InputError("heightmap and mesh are alternatives: give one of them");
     job.tracer = scene.trace.tracer;
@@ -469,7 +474,7 @@ py::tuple render(const PyScene& ps, const py::object& heightmap, const py::objec
     if (!heightmap.is_none()) {
         job.surface = heightmap_from_array(scene, heightmap);
     } else {
-        job.surface = freeform::io::scene_surface(scene, limits);
+        job.surface = freeform::io::scene_surface(scene_file, limits);
         job.surface_is_scene_start = true;
     }
     if (!mesh.is_none()) {
@@ -528,13 +533,13 @@ PYBIND11_MODULE(freeform, m) {
                     "A scene from a dict or the text of a scene file, checked key by key as a file is. "
                     "Relative file names resolve against base_dir (default: the working folder).")
         .def(
-            "to_json", [](const PyScene& s) { return json_to_python(freeform::scene_to_json(s.scene)); },
+            "to_json", [](const PyScene& s) { return json_to_python(freeform::job_to_json(s.job)); },
             "The scene as a dict with every default written out (Scene.from_json reads it back).")
         .def_property_readonly(
             "path", [](const PyScene& s) { return s.path ? py::object(py::str(*s.path)) : py::object(py::none()); },
             "The file the scene was read from (None for Scene.from_json).")
         .def("__repr__", [](const PyScene& s) {
-            const freeform::Receiver& r = s.scene.receiver;
+            const freeform::Receiver& r = s.job.scene.receiver;
             return "<freeform.Scene " + (s.path ? "'" + *s.path + "'" : std::string("from JSON")) + ": receiver " +
                    std::to_string(r.width) + " x " + std::to_string(r.height) + ">";
         });

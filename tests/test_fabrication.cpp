@@ -99,11 +99,10 @@ TEST_CASE("facets approach the patches as 1/k, and the tolerance picks the small
 
 TEST_CASE("facet tolerance: a twentieth of a receiver cell of light displacement") {
     Scene s = basic_scene(200);  // 1 mm cells, receiver 0.5 m away
-    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.05e-3 / 1.0));
-    s.optimise.export_tolerance = 0.5;
-    CHECK(facet_normal_tolerance(s) == doctest::Approx(0.5e-3));
+    CHECK(facet_normal_tolerance(s, ExportOptions{}.tolerance) == doctest::Approx(0.05e-3 / 1.0));
+    CHECK(facet_normal_tolerance(s, 0.5) == doctest::Approx(0.5e-3));
     s.surface.material = Lens{1.5, 0.01};  // a face of index 1.5 deflects a quarter as much
-    CHECK(facet_normal_tolerance(s) == doctest::Approx(2e-3));
+    CHECK(facet_normal_tolerance(s, 0.5) == doctest::Approx(2e-3));
 }
 
 TEST_CASE("the automatic level keeps the exported mesh within its triangle budget") {
@@ -113,20 +112,21 @@ TEST_CASE("the automatic level keeps the exported mesh within its triangle budge
     CHECK(subdivisions_for_triangles(hm, 3199) == 1);
     CHECK(subdivisions_for_triangles(hm, 3200) == 2);
     CHECK(subdivisions_for_triangles(hm, 100) == 1);  // never below one facet pair a cell
-    s.optimise.export_tolerance = 0.01;                // asks for more than the budget allows
-    s.optimise.export_max_triangles = 20'000;          // k ≤ 5
+    ExportOptions o;
+    o.tolerance = 0.01;                                // asks for more than the budget allows
+    o.max_triangles = 20'000;                          // k ≤ 5
     s.surface.phong_alpha = 0.5;                       // curved patches (flat ones need k = 1)
     Heightmap curved = hm;
     shape(curved, [](double u, double v) { return 0.002 * std::sin(140 * u) * std::cos(100 * v); });
-    const Fabrication f = make_fabrication(s, curved);
+    const Fabrication f = make_fabrication(s, o, curved);
     CHECK(f.subdivisions == 5);
     CHECK(f.mesh.triangles.size() <= 20'000u);
     CHECK(f.normal_error > f.normal_tolerance);  // the budget, not the tolerance, set k
     CHECK_FALSE(f.tolerance_met);                // and the fabrication says so
     // With room enough the same surface gets the k its tolerance asks for, and meets it.
-    s.optimise.export_tolerance = 10;  // the loosest the scene allows: 20 mrad here
-    s.optimise.export_max_triangles = 1'000'000;
-    const Fabrication roomy = make_fabrication(s, curved);
+    o.tolerance = 10;  // the loosest the scene allows: 20 mrad here
+    o.max_triangles = 1'000'000;
+    const Fabrication roomy = make_fabrication(s, o, curved);
     CHECK(roomy.tolerance_met);
     CHECK(roomy.normal_error <= roomy.normal_tolerance);
     CHECK(roomy.subdivisions < 16);
@@ -158,7 +158,7 @@ void check_exported_matches(Scene s, int n, double max_l1) {
     const TraceSetup setup = make_trace_setup(s, st.surface, nullptr, 1);
     const RaySet& rays = setup.rays;
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);
-    const Fabrication f = make_fabrication(s, st.surface);
+    const Fabrication f = make_fabrication(s, ExportOptions{}, st.surface);
     const ExportedTrace e = trace_exported(exec::omp, s, st.surface, f.subdivisions, setup);
     const double l1 = l1_distance(design.histogram, e.histogram) / (2.0 * double(rays.total));
     // And the same facets with k = 1: far off, or the check above could not fail.
@@ -271,18 +271,18 @@ TEST_CASE("a mesh is its geometry: stored normals change nothing unless asked fo
 // surface's place, gives the design's error_physical (both are the same facets and the
 // same cell-mean rays, traced by two routes through the code).
 TEST_CASE("render(): a design's height map renders to its error, its exported mesh to its error_physical") {
-    Scene s = basic_scene(40, 4);
-    s.target = TargetSpec{};
-    s.surface.nx = s.surface.ny = 21;
-    s.optimise.max_iterations = 2000;
-    s.optimise.time_budget = 1000;
-    s.optimise.seed = 5;
-    s.optimise.threads = 2;
+    DesignJob s{basic_scene(40, 4), {}};
+    s.scene.target = TargetSpec{};
+    s.scene.surface.nx = s.scene.surface.ny = 21;
+    s.options.max_iterations = 2000;
+    s.options.time_budget = 1000;
+    s.options.seed = 5;
+    s.options.threads = 2;
     const ImageD target = ring_and_bar(40, 40);
     const CompletedDesign d = design(s, target);
     REQUIRE(d.error_physical());
 
-    const RenderResult h = render(d.scene, d.result.surface, target);
+    const RenderResult h = render(d.scene, d.options, d.result.surface, target);
     CHECK(h.decision.tracer == TracerChoice::heightfield);
     CHECK(h.rays == d.fitted.rays.size());
     CHECK(*h.error == d.fitted.error);
@@ -290,6 +290,7 @@ TEST_CASE("render(): a design's height map renders to its error, its exported me
 
     RenderRequest job;
     job.scene = d.scene;
+    job.options = d.options;
     job.surface = d.result.surface;
     job.target = target;
     job.mesh = d.exported.fabrication.mesh;

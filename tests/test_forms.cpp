@@ -114,15 +114,15 @@ TEST_CASE("a smooth lens solid keeps its walls and back flat and stays a closed 
 
 TEST_CASE("export formats: auto is STEP and the mesh where STEP is built, else the mesh; a format the build lacks "
           "is refused") {
-    Scene s = basic_scene(20);
+    ExportOptions s;  // "auto"
     const std::vector<ExportFormat> f = io::export_formats(s);
     REQUIRE(!f.empty());
     CHECK(f.back() == ExportFormat::mesh);
     CHECK((f.size() == 2) == io::format_available(ExportFormat::step));
     if (f.size() == 2) CHECK(f.front() == ExportFormat::step);
-    s.optimise.export_formats = {ExportFormat::sag, ExportFormat::mesh};
-    CHECK(io::export_formats(s) == s.optimise.export_formats);
-    s.optimise.export_formats = {ExportFormat::step};
+    s.formats = {ExportFormat::sag, ExportFormat::mesh};
+    CHECK(io::export_formats(s) == s.formats);
+    s.formats = {ExportFormat::step};
     if (!io::format_available(ExportFormat::step)) CHECK_THROWS_AS(io::export_formats(s), InputError);
 }
 
@@ -132,7 +132,7 @@ TEST_CASE("a grid sag written and read back is judged from the file") {
     shape(hm, [](double u, double v) { return 0.05 * u * u + 0.02 * u * v; });
     const BSplineSurface spline = fit_bspline(hm, 1.0, 4);
     const ImageD target = ImageD::Constant(40, 40, 1.0);
-    const io::FormCheck fc = io::write_and_check_form(ExportFormat::sag, "form.dat", s, hm, spline, &target, 1);
+    const io::FormCheck fc = io::write_and_check_form(ExportFormat::sag, "form.dat", s, hm, spline, &target, 1, 1);
     CHECK(fc.bytes == std::filesystem::file_size("form.dat"));
     CHECK(fc.valid == "yes");
 #if defined(FREEFORM_WITH_EMBREE)
@@ -141,5 +141,5 @@ TEST_CASE("a grid sag written and read back is judged from the file") {
     CHECK(fc.cells->error >= 0);
     CHECK(fc.cells->totals.energy() > 0.5);
 #endif
-    CHECK_THROWS_AS(io::write_and_check_form(ExportFormat::mesh, "x", s, hm, spline, &target, 1), InputError);
+    CHECK_THROWS_AS(io::write_and_check_form(ExportFormat::mesh, "x", s, hm, spline, &target, 1, 1), InputError);
 }

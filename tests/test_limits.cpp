@@ -200,11 +200,12 @@ TEST_CASE("json_depth: nested brackets refused in one pass, with the position") 
 }
 
 TEST_CASE("memory plan: a scene's rays are weighed before they are made") {
-    Scene scene = testing::basic_scene(200, 16);
+    DesignJob job{testing::basic_scene(200, 16), {}};
+    Scene& scene = job.scene;
     scene.target = TargetSpec{};
     scene.target->text = "E";
-    const ResourcePlan render = plan_resources(scene, RunKind::render, 2);
-    const ResourcePlan design = plan_resources(scene, RunKind::design, 2);
+    const ResourcePlan render = plan_resources(job, RunKind::render, 2);
+    const ResourcePlan design = plan_resources(job, RunKind::design, 2);
     // 640,000 rays of the light (80 bytes each in a render) plus 64 per cell for the
     // cell means; a design keeps more per ray and exports up to 2 M triangles.
     CHECK(render.rays == 2'560'000);
@@ -212,19 +213,19 @@ TEST_CASE("memory plan: a scene's rays are weighed before they are made") {
     CHECK(render.bytes < 1.0e9);
     CHECK(design.bytes > render.bytes);
     CHECK(design.bytes < 2.0e9);
-    CHECK_NOTHROW(check_resources(scene, RunKind::design, 2, Limits{}));
+    CHECK_NOTHROW(check_resources(job, RunKind::design, 2, Limits{}));
 
     // 2^20 rays per cell on a 16384² receiver: 2.8e14 rays.
     scene.receiver.width = scene.receiver.height = 16384;
     scene.light.rays_per_cell = 1 << 20;
-    const std::string m = input_error([&] { (void)check_resources(scene, RunKind::render, 2, Limits{}); });
+    const std::string m = input_error([&] { (void)check_resources(job, RunKind::render, 2, Limits{}); });
     CHECK(contains(m, "the render would need about"));
     CHECK(contains(m, "2.81e+14 rays"));
     CHECK(contains(m, "over the limit memory_bytes = 16 GiB"));
     // A raised limit lets it through (the plan itself allocates nothing).
     Limits huge;
     huge.memory_bytes = ~std::uint64_t(0);
-    CHECK_NOTHROW(check_resources(scene, RunKind::render, 2, huge));
+    CHECK_NOTHROW(check_resources(job, RunKind::render, 2, huge));
 }
 
 TEST_CASE("StagedOutput: all new files or all previous ones") {

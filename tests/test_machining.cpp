@@ -209,7 +209,7 @@ TEST_CASE("scene file: surface.tool_radius") {
     CHECK(!scene_to_json(parse("{}"))["surface"].contains("tool_radius"));  // 0: no key, as before
     CHECK_THROWS_WITH_AS(parse(R"({"tool_radius": -0.001})"), doctest::Contains("surface.tool_radius"), InputError);
     // The designer's default terms include the tool's exactly when there is one.
-    const DesignOptions o;
+    const PenaltyWeights o;
     CHECK(default_penalties(o, 0.005).names().back() == "tool_radius");
     CHECK(default_penalties(o).names().size() + 1 == default_penalties(o, 0.005).names().size());
 }

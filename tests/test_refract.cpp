@@ -469,7 +469,7 @@ TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the desig
     const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);
 
-    const Fabrication fab = make_fabrication(s, st.surface);  // the watertight lens solid
+    const Fabrication fab = make_fabrication(s, ExportOptions{}, st.surface);  // the watertight lens solid
     REQUIRE(check_mesh(fab.mesh).watertight());
     const ExtraMesh solid = to_surface_frame(fab.mesh, s.surface.frame, MeshMaterial::refractive(1.49));
     RaySet lifted = rays;

@@ -119,11 +119,12 @@ TEST_CASE("a minimal scene gets every documented default") {
     CHECK(s.meshes.empty());
     CHECK(s.trace.tracer == TracerChoice::automatic);
     CHECK(s.trace.max_depth == 8);
-    CHECK(s.optimise.time_budget == 60);
-    CHECK(s.optimise.seed == 1);
-    CHECK(s.optimise.max_iterations == 0);
-    CHECK(s.optimise.target_error == 0);
-    CHECK(s.optimise.threads == 0);
+    const DesignOptions o = job_from_json(minimal_scene()).options;
+    CHECK(o.time_budget == 60);
+    CHECK(o.seed == 1);
+    CHECK(o.max_iterations == 0);
+    CHECK(o.target_error == 0);
+    CHECK(o.threads == 0);
     CHECK(s.name.empty());
 }
 
@@ -179,11 +180,12 @@ TEST_CASE("a full scene parses with the values it states") {
 
     CHECK(s.trace.tracer == TracerChoice::embree);
     CHECK(s.trace.max_depth == 12);
-    CHECK(s.optimise.time_budget == 2.5);
-    CHECK(s.optimise.seed == 42);
-    CHECK(s.optimise.max_iterations == 1000);
-    CHECK(s.optimise.target_error == 0.05);
-    CHECK(s.optimise.threads == 3);
+    const DesignOptions o = job_from_json(full_scene(), "/scenes/here").options;
+    CHECK(o.time_budget == 2.5);
+    CHECK(o.seed == 42);
+    CHECK(o.max_iterations == 1000);
+    CHECK(o.target_error == 0.05);
+    CHECK(o.threads == 3);
 }
 
 TEST_CASE("other light types, a PFM initial surface and an image target") {
@@ -423,7 +425,7 @@ TEST_CASE("values that merge_patch cannot express") {
     CHECK(starts_with(parse_error(j), "light.direction[2]: expected a number, got an empty array"));
     j = minimal_scene();
     j["optimise"]["seed"] = std::uint64_t(18446744073709551615ULL);
-    CHECK(scene_from_json(j).optimise.seed == 18446744073709551615ULL);
+    CHECK(job_from_json(j).options.seed == 18446744073709551615ULL);
     j["optimise"]["max_iterations"] = std::uint64_t(18446744073709551615ULL);
     CHECK(starts_with(parse_error(j), "optimise.max_iterations: must be an integer >= 0"));
     j = minimal_scene();
@@ -518,11 +520,11 @@ TEST_CASE("randomly mutated scenes parse or throw InputError, never anything els
         for (int m = 0; m < mutations; ++m) mutate(j, rng);
         CAPTURE(trial);
         try {
-            const Scene s = scene_from_json(j, "/tmp/base");
+            const DesignJob s = job_from_json(j, "/tmp/base");
             ++parsed;
             // Whatever parses must survive the round trip too.
-            const json out = scene_to_json(s);
-            CHECK(scene_to_json(scene_from_json(out, "/elsewhere")) == out);
+            const json out = job_to_json(s);
+            CHECK(job_to_json(job_from_json(out, "/elsewhere")) == out);
         } catch (const InputError& e) {
             ++rejected;
             CHECK(std::string(e.what()).size() > 0);
@@ -535,6 +537,70 @@ TEST_CASE("randomly mutated scenes parse or throw InputError, never anything els
     CHECK(rejected > 10);
 }
 
+// Each optimise key lands in the field of the module that uses it (design/options.hpp:
+// the objective's weights, the penalties', the proposals', the schedule's, the export's),
+// read as written and written back as read.
+TEST_CASE("optimise keys: each reaches its module's option field") {
+    struct Row {
+        const char* key;
+        json value;
+        double (*field)(const DesignOptions&);
+    };
+    const Row rows[] = {
+        {"sobel_weight", 0.3, [](const DesignOptions& o) { return o.objective.sobel; }},
+        {"energy_threshold", 0.8, [](const DesignOptions& o) { return o.objective.energy_threshold; }},
+        {"lost_light_weight", 2.5, [](const DesignOptions& o) { return o.objective.lost_light; }},
+        {"height_bound_weight", 3.0, [](const DesignOptions& o) { return o.penalties.height_bound; }},
+        {"valley_weight", 4.0, [](const DesignOptions& o) { return o.penalties.valley; }},
+        {"valley_min_angle", 160.0, [](const DesignOptions& o) { return o.penalties.valley_min_angle; }},
+        {"smoothness_weight", 5.0, [](const DesignOptions& o) { return o.penalties.smoothness; }},
+        {"bandit_sync", 7, [](const DesignOptions& o) { return double(o.proposals.bandit_sync); }},
+        {"preprocess_iterations", 11, [](const DesignOptions& o) { return double(o.proposals.preprocess_iterations); }},
+        {"preprocess_keep", 2, [](const DesignOptions& o) { return double(o.proposals.preprocess_keep); }},
+        {"error_guided", true, [](const DesignOptions& o) { return double(o.proposals.error_guided); }},
+        {"single_vertex", true, [](const DesignOptions& o) { return double(o.proposals.single_vertex); }},
+        {"max_shift_cells", 6.0, [](const DesignOptions& o) { return o.proposals.max_shift_cells; }},
+        {"min_shift_cells", 0.5, [](const DesignOptions& o) { return o.proposals.min_shift_cells; }},
+        {"refine_max_shift_cells", 2.0, [](const DesignOptions& o) { return o.proposals.refine_max_shift_cells; }},
+        {"initial_acceptance", 0.2, [](const DesignOptions& o) { return o.schedule.initial_acceptance; }},
+        {"refine_initial_acceptance", 0.01, [](const DesignOptions& o) { return o.schedule.refine_initial_acceptance; }},
+        {"initial_temperature_scale", 3.0, [](const DesignOptions& o) { return o.schedule.initial_temperature_scale; }},
+        {"cooling", 0.9, [](const DesignOptions& o) { return o.schedule.cooling; }},
+        {"temperature_steps", 60, [](const DesignOptions& o) { return double(o.schedule.temperature_steps); }},
+        {"reheat_factor", 0.25, [](const DesignOptions& o) { return o.schedule.reheat_factor; }},
+        {"patience_fraction", 0.2, [](const DesignOptions& o) { return o.schedule.patience_fraction; }},
+        {"export_subdivisions", 3, [](const DesignOptions& o) { return double(o.exports.subdivisions); }},
+        {"export_tolerance", 0.1, [](const DesignOptions& o) { return o.exports.tolerance; }},
+        {"export_max_triangles", 5000, [](const DesignOptions& o) { return double(o.exports.max_triangles); }},
+        {"smooth_iterations", 2, [](const DesignOptions& o) { return double(o.smooth_iterations); }},
+        {"coarse_rays_per_cell", 9.0, [](const DesignOptions& o) { return o.coarse_rays_per_cell; }},
+        {"min_rays_per_mesh_cell", 48.0, [](const DesignOptions& o) { return o.min_rays_per_mesh_cell; }},
+    };
+    const DesignOptions defaults;
+    for (const Row& r : rows) {
+        CAPTURE(r.key);
+        json j = minimal_scene();
+        j["optimise"][r.key] = r.value;
+        const DesignJob job = job_from_json(j);
+        const double expected = r.value.is_boolean() ? double(r.value.get<bool>()) : r.value.get<double>();
+        CHECK(r.field(job.options) == expected);
+        CHECK(r.field(defaults) != expected);  // the value read is not the default (else the row proves nothing)
+        CHECK(job_to_json(job)["optimise"][r.key] == r.value);
+    }
+    json j = minimal_scene();
+    j["optimise"]["bandit"] = "ucb1";
+    j["optimise"]["kernel_shapes"] = "isotropic";
+    j["optimise"]["evaluation"] = "full";
+    j["optimise"]["export_formats"] = json::array({"sag"});
+    const DesignOptions o = job_from_json(j).options;
+    CHECK(o.proposals.bandit == BanditKind::ucb1);
+    CHECK(o.proposals.kernel_shapes == KernelShapes::isotropic);
+    CHECK(o.evaluation == EvaluationMode::full);
+    CHECK(o.exports.formats == std::vector<ExportFormat>{ExportFormat::sag});
+    // The scene alone carries none of them: scene_to_json writes no optimise block.
+    CHECK_FALSE(scene_to_json(job_from_json(j).scene).contains("optimise"));
+}
+
 TEST_CASE("scene_to_json writes every default and reads back to the same JSON") {
     const std::vector<json> scenes = {
         minimal_scene(), full_scene(),
@@ -545,17 +611,22 @@ TEST_CASE("scene_to_json writes every default and reads back to the same JSON") 
         json::parse(R"({"light": {"type": "disk", "center": [0, 0, 0.3], "normal": [0, 0.2, -1], "radius": 0.004,
                                   "rays": 77}, "surface": {}, "receiver": {}, "target": {"text": "E"}})")};
     for (const json& j : scenes) {
-        const Scene s = scene_from_json(j, "/some/dir");
-        const json out = scene_to_json(s);
+        const DesignJob job = job_from_json(j, "/some/dir");
+        const Scene& s = job.scene;
+        const json out = job_to_json(job);
         CAPTURE(out.dump());
-        CHECK(scene_to_json(scene_from_json(out, "/other")) == out);
+        CHECK(job_to_json(job_from_json(out, "/other")) == out);
         // And through text, as metrics.json would be read back.
-        CHECK(scene_to_json(scene_from_json(json::parse(out.dump()))) == out);
+        CHECK(job_to_json(job_from_json(json::parse(out.dump()))) == out);
+        // The scene alone: the same, without the optimiser's block.
+        json scene_only = out;
+        scene_only.erase("optimise");
+        CHECK(scene_to_json(s) == scene_only);
         // Defaults are written out.
         CHECK(out["surface"].contains("phong_alpha"));
         CHECK(out["receiver"].contains("deposit"));
         CHECK(out["trace"]["max_depth"] == s.trace.max_depth);
-        CHECK(out["optimise"]["seed"] == s.optimise.seed);
+        CHECK(out["optimise"]["seed"] == job.options.seed);
         CHECK(out["light"]["rays_per_cell"] == s.light.rays_per_cell);
     }
     // A lens's rim: "auto" is written as such, metres as given.
@@ -721,9 +792,9 @@ TEST_CASE("the example scenes load") {
     for (const auto& entry : fs::directory_iterator(dir)) {
         if (entry.path().extension() != ".json") continue;
         CAPTURE(entry.path().string());
-        const Scene s = io::load_scene(entry.path());
-        CHECK_FALSE(s.name.empty());
-        CHECK(scene_to_json(scene_from_json(scene_to_json(s))) == scene_to_json(s));
+        const DesignJob job = io::load_job(entry.path());
+        CHECK_FALSE(job.scene.name.empty());
+        CHECK(job_to_json(job_from_json(job_to_json(job))) == job_to_json(job));
         ++count;
     }
     CHECK(count >= 4);

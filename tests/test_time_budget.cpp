@@ -51,12 +51,12 @@ TEST_CASE("a budget the start used up: no level is annealed, and the result desc
     CHECK(r.rays == rays.size());
     CHECK(r.irradiance == trace_scene(scene, r.surface, rays).histogram);
     Heightmap copy = r.surface;
-    const Penalties penalties = default_penalties(o);
+    const Penalties penalties = default_penalties(o.penalties);
     const PathParams pp = make_path_params(scene);
     ProposalSettings ps;
     ps.bank = default_kernel_bank(5);
     SurfaceProblem fresh(copy, rays, pp, make_target(target, 32, 32, target_total(rays, pp)),
-                         {o.sobel_weight, o.energy_threshold, o.lost_light_weight}, penalties, ps,
+                         o.objective, penalties, ps,
                          make_bandit(BanditKind::uniform, int(ps.bank.size())), 1.0, 1.0);
     CHECK(r.value.total == fresh.value().total);
     CHECK(r.value.error == fresh.value().error);

@@ -266,7 +266,7 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
         if (cpp == t.cells_per_pixel) CHECK(surface.heights() == c.surface.heights());
     }
 
-    DesignOptions o = s.optimise;
+    DesignOptions o;
     o.seed = 5;
     o.time_budget = 0;
     o.max_iterations = 3000;

@@ -254,12 +254,14 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
 // replaces it), the meshes, and the target.
 RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
     RenderRequest job;
-    job.scene = io::load_scene(a.scene, limits);
+    DesignJob scene_file = io::load_job(a.scene, limits);
+    if (a.seed) scene_file.options.seed = std::uint64_t(*a.seed);
+    job.scene = scene_file.scene;
+    job.options = scene_file.options;
     Scene& scene = job.scene;
-    if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
     check_output_dir(a.out, render_outputs);
     job.threads = thread_count(exec::omp_t{a.threads});
-    check_resources(scene, RunKind::render, job.threads, limits);
+    check_resources(scene_file, RunKind::render, job.threads, limits);
     if (!a.heightmap.empty() && !a.mesh.empty())
         throw InputError("--heightmap and --mesh are alternatives: give one of them");
     if (!a.material.empty()) {
@@ -278,7 +280,7 @@ RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
             throw InputError(std::string("--heightmap: ") + e.what());
         }
     } else {
-        job.surface = io::scene_surface(scene, limits);
+        job.surface = io::scene_surface(scene_file, limits);
         job.surface_is_scene_start = true;
     }
     // A solid is one surface: corners repeated per face (OBJ with face normals, STL) are
@@ -414,7 +416,7 @@ void print_forms(const CompletedDesign& d, const json& m) {
                     "surface.step / surface.dat keep the designed surface\n",
                     fab.normal_error * 1e3, fab.normal_tolerance * 1e3, fab.subdivisions,
                     fab.automatic ? (" (optimise.export_max_triangles = " +
-                                     std::to_string(d.scene.optimise.export_max_triangles) + " allows no more)")
+                                     std::to_string(d.options.exports.max_triangles) + " allows no more)")
                                         .c_str()
                                   : " (optimise.export_subdivisions)");
 }
@@ -431,7 +433,7 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 result.stopped_early ? " -- best result so far written" : "");
     // Where the time went: the budget bounds the design, its start included; the final
     // traces, the export checks and the writing of the files come after it.
-    const double budget = d.scene.optimise.time_budget;
+    const double budget = d.options.time_budget;
     std::printf("  time: %.1f s designing%s, then %.1f s for the final traces and the export checks, %.1f s writing "
                 "the files\n",
                 result.seconds,
@@ -496,22 +498,23 @@ mpi::ReplicaOptions replica_options(const DesignArgs& a) {
 }
 #endif
 
-// The scene of a design run: the file with the command line's settings.
-Scene design_scene(const DesignArgs& a, const Limits& limits) {
-    Scene scene = io::load_scene(a.scene, limits);
-    if (a.seed) scene.optimise.seed = std::uint64_t(*a.seed);
+// The job of a design run: the scene file with the command line's settings.
+DesignJob design_job(const DesignArgs& a, const Limits& limits) {
+    DesignJob job = io::load_job(a.scene, limits);
+    DesignOptions& o = job.options;
+    if (a.seed) o.seed = std::uint64_t(*a.seed);
     if (a.time_budget) {
         if (!(*a.time_budget > 0)) throw InputError("--time-budget: must be > 0 seconds");
-        scene.optimise.time_budget = *a.time_budget;
+        o.time_budget = *a.time_budget;
     }
-    if (a.threads) scene.optimise.threads = *a.threads;
+    if (a.threads) o.threads = *a.threads;
     try {
-        check_designable(scene);  // before any work (the target image is loaded next)
+        check_designable(job.scene);  // before any work (the target image is loaded next)
     } catch (const InputError& e) {
         throw InputError(a.scene.string() + ": " + e.what());
     }
-    scene.optimise.progress_every = 500;  // the live line's pace
-    return scene;
+    o.progress_every = 500;  // the live line's pace
+    return job;
 }
 
 // What a design run shows while it works: its header line, the live status line (on a
@@ -557,8 +560,8 @@ private:
         const auto [nx, ny] = final_mesh(s, plan.levels);
         char line[512];
         std::snprintf(line, sizeof line, "%d x %d mesh, %d x %d receiver, %g rays per cell, %.0f s budget, seed %llu",
-                      nx, ny, s.receiver.width, s.receiver.height, s.light.rays_per_cell, s.optimise.time_budget,
-                      (unsigned long long)s.optimise.seed);
+                      nx, ny, s.receiver.width, s.receiver.height, s.light.rays_per_cell, plan.options.time_budget,
+                      (unsigned long long)plan.options.seed);
         return "designing " + a.scene.string() + ": " + line;
     }
 
@@ -625,15 +628,18 @@ void write_design(const DesignArgs& a, const CompletedDesign& d, const json& rep
 // `freeform design`: everything is read and checked before the design starts.
 int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
-    const Scene scene = design_scene(a, limits);
+    const DesignJob job = design_job(a, limits);
+    const Scene& scene = job.scene;
     check_output_dir(a.out, design_outputs);
-    // Planned once: the memory check (before any surface is made), the header line and the
-    // design read the same levels.
-    std::vector<LevelPlan> levels = plan_levels(scene);
-    check_resources(scene, RunKind::design, thread_count(exec::omp_t{scene.optimise.threads}), limits, &levels);
+    // Planned once: the memory check (before any surface is made), the header line, the
+    // start surface's mesh and the design read the same levels.
+    std::vector<LevelPlan> levels = plan_levels(scene, job.options);
+    check_resources(job, RunKind::design, thread_count(exec::omp_t{job.options.threads}), limits, &levels);
     const ImageD target = io::load_target_image(scene, limits);
-    const std::vector<ExportFormat> formats = io::export_formats(scene);  // a format this build lacks: exit 2 now
-    PlannedDesign plan = plan_design(scene, io::load_start_surface(scene, limits), std::move(levels));
+    // A format this build lacks: exit 2 now.
+    const std::vector<ExportFormat> formats = io::export_formats(job.options.exports);
+    std::optional<Heightmap> start = io::load_start_surface(scene, levels, limits);
+    PlannedDesign plan = plan_design(job, std::move(start), std::move(levels));
     DesignSetup setup;
     setup.start_only = a.start_only;
 
@@ -692,9 +698,10 @@ ExportFile parse_export_format(const std::string& f) {
 }
 
 // The exported facets of `hm` (stl/obj), written, and judged when `target` is given.
-void export_mesh(const ExportArgs& a, ExportFile kind, const Scene& scene, const Heightmap& hm,
+void export_mesh(const ExportArgs& a, ExportFile kind, const DesignJob& job, const Heightmap& hm,
                  const std::optional<ImageD>& target) {
-    const Fabrication fab = make_fabrication(scene, hm);
+    const Scene& scene = job.scene;
+    const Fabrication fab = make_fabrication(scene, job.options.exports, hm);
     if (kind == ExportFile::stl)
         io::write_stl(a.out, fab.mesh);
     else
@@ -707,7 +714,7 @@ void export_mesh(const ExportArgs& a, ExportFile kind, const Scene& scene, const
 #if defined(FREEFORM_WITH_EMBREE)
     if (!target) return;
     const CellMeans c = exported_cell_means(exec::omp_t{a.threads}, scene, hm, exported_geometry(scene, hm, fab.subdivisions),
-                                            &*target, physical_cell_mean_options(scene.optimise.seed));
+                                            &*target, physical_cell_mean_options(job.options.seed));
     std::printf("  error_physical %.4f: the facets traced as flat triangles, %.0f rays per cell\n", c.error,
                 c.rays_per_cell);
 #endif
@@ -717,15 +724,16 @@ void export_mesh(const ExportArgs& a, ExportFile kind, const Scene& scene, const
 int run_export(const ExportArgs& a) {
     const Limits limits = parse_limits(a.limits);
     const ExportFile kind = parse_export_format(a.format);
-    Scene scene = io::load_scene(a.scene, limits);
-    scene.optimise.threads = a.threads;
+    DesignJob job = io::load_job(a.scene, limits);
+    job.options.threads = a.threads;
+    const Scene& scene = job.scene;
     const Heightmap hm = io::read_heightmap(scene, a.heightmap, limits);
     std::error_code ec;
     if (fs::is_directory(a.out, ec)) throw InputError("--out: " + a.out.string() + " is a folder; name the file");
     std::optional<ImageD> target;
     if (scene.target && !a.no_check) target = io::load_target_image(scene, limits);
     if (kind == ExportFile::stl || kind == ExportFile::obj) {
-        export_mesh(a, kind, scene, hm, target);
+        export_mesh(a, kind, job, hm, target);
     } else {
         const double alpha = scene.surface.phong_alpha;
         const Heightmap top = export_blank(scene, hm);  // a lens's rim too
@@ -733,7 +741,8 @@ int run_export(const ExportArgs& a) {
         // The sag table carries the height map's vertices; only STEP needs the spline.
         const BSplineSurface spline = step ? fit_bspline(top, alpha, spline_samples_per_cell) : BSplineSurface{};
         const io::FormCheck fc = io::write_and_check_form(step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
-                                                          hm, spline, target ? &*target : nullptr, a.threads);
+                                                          hm, spline, target ? &*target : nullptr,
+                                                          job.options.seed, a.threads);
         std::printf("wrote %s: %.1f MB in %.1f s, valid: %s; ", a.out.string().c_str(), double(fc.bytes) / 1e6,
                     fc.write_seconds, fc.valid.c_str());
         if (step) {
@@ -753,7 +762,7 @@ int run_export(const ExportArgs& a) {
                         fc.cells->error, (long long)fc.triangles, fc.cells->rays_per_cell);
     }
     if (target) {
-        const CellMeans designed = designed_cell_means(scene, hm, *target, physical_cell_mean_options(scene.optimise.seed),
+        const CellMeans designed = designed_cell_means(scene, hm, *target, physical_cell_mean_options(job.options.seed),
                                                        a.threads);
         std::printf("  the designed surface itself (%s): %.4f\n", a.heightmap.string().c_str(), designed.error);
     }

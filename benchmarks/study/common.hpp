@@ -64,8 +64,8 @@ inline json parse_json_option(const std::string& text, const std::string& option
 }
 
 // A scene file with RFC 7396 merge patches applied in order, then parsed and checked like
-// io::load_scene does (relative file names resolve against the file's directory).
-inline Scene load_patched_scene(const fs::path& file, const std::vector<json>& patches) {
+// io::load_job does (relative file names resolve against the file's directory).
+inline DesignJob load_patched_job(const fs::path& file, const std::vector<json>& patches) {
     const std::string text = io::read_file_bytes(file);
     json j;
     try {
@@ -75,9 +75,9 @@ inline Scene load_patched_scene(const fs::path& file, const std::vector<json>& p
     }
     for (const json& p : patches) j.merge_patch(p);
     try {
-        Scene s = scene_from_json(j, fs::absolute(file).parent_path());
-        io::check_scene_files(s);
-        return s;
+        DesignJob job = job_from_json(j, fs::absolute(file).parent_path());
+        io::check_scene_files(job.scene);
+        return job;
     } catch (const IoError& e) {
         throw IoError(file.string() + " (patched): " + e.what());
     } catch (const InputError& e) {
@@ -86,26 +86,13 @@ inline Scene load_patched_scene(const fs::path& file, const std::vector<json>& p
 }
 
 // The final mesh the designer would end with for this scene (the scene's, or "auto").
-inline std::pair<int, int> final_mesh_of(const Scene& scene) {
-    if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
-    const auto levels = plan_levels(scene);
-    return {levels.back().mesh_x, levels.back().mesh_y};
-}
+inline std::pair<int, int> final_mesh_of(const DesignJob& job) { return final_mesh(job.scene, job.options); }
 
 inline ImageD target_image(const Target& t) {
     ImageD img(t.height, t.width);
     for (int y = 0; y < t.height; ++y)
         for (int x = 0; x < t.width; ++x) img(y, x) = from_fixed(t.cells[std::size_t(y) * t.width + x]);
     return img;
-}
-
-// The weights of the objective our designer minimises, from a scene's optimise block.
-inline ObjectiveWeights objective_weights(const OptimiseSpec& o) {
-    ObjectiveWeights w;
-    w.sobel = o.sobel_weight;
-    w.energy_threshold = o.energy_threshold;
-    w.lost_light = o.lost_light_weight;
-    return w;
 }
 
 // One full render of a surface judged against a case.
@@ -123,8 +110,10 @@ struct Evaluation {
 // method minimises (image error, Sobel term, energy threshold and lost-light terms),
 // comparable across methods.
 template <class TracerFactory>
-Evaluation evaluate_with(const Scene& judge, const Heightmap& surface, double phong_alpha, const ImageD& target_image,
-                         std::uint64_t seed, int threads, double ray_factor, TracerFactory&& make_tracer) {
+Evaluation evaluate_with(const DesignJob& judge_job, const Heightmap& surface, double phong_alpha,
+                         const ImageD& target_image, std::uint64_t seed, int threads, double ray_factor,
+                         TracerFactory&& make_tracer) {
+    const Scene& judge = judge_job.scene;
     Light light = judge.light;
     if (light.rays > 0) light.rays = std::max<std::int64_t>(1, std::llround(double(light.rays) * ray_factor));
     else light.rays_per_cell *= ray_factor;
@@ -146,7 +135,7 @@ Evaluation evaluate_with(const Scene& judge, const Heightmap& surface, double ph
     ImageState state(e.target);
     state.reset(e.histogram);
     const ObjectiveValue v = combine(state.sums(), rays.total, 0.0,
-                                     objective_weights(judge.optimise));
+                                     judge_job.options.objective);
     e.error = v.error;
     e.energy = totals.energy();
     e.objective = v.total;
@@ -154,7 +143,7 @@ Evaluation evaluate_with(const Scene& judge, const Heightmap& surface, double ph
     return e;
 }
 
-inline Evaluation evaluate(const Scene& judge, const Heightmap& surface, double phong_alpha, const ImageD& target_image,
+inline Evaluation evaluate(const DesignJob& judge, const Heightmap& surface, double phong_alpha, const ImageD& target_image,
                            std::uint64_t seed, int threads, double ray_factor = 1.0) {
     return evaluate_with(judge, surface, phong_alpha, target_image, seed, threads, ray_factor,
                          [](const Heightmap& h, const RaySet& r, const PathParams& p) {
@@ -163,7 +152,7 @@ inline Evaluation evaluate(const Scene& judge, const Heightmap& surface, double 
 }
 
 #if defined(FREEFORM_WITH_EMBREE)
-inline Evaluation evaluate_embree(const Scene& judge, const Heightmap& surface, double phong_alpha,
+inline Evaluation evaluate_embree(const DesignJob& judge, const Heightmap& surface, double phong_alpha,
                                   const ImageD& target_image, std::uint64_t seed, int threads) {
     return evaluate_with(judge, surface, phong_alpha, target_image, seed, threads, 1.0,
                          [](const Heightmap& h, const RaySet& r, const PathParams& p) {

@@ -34,14 +34,15 @@ struct BudgetExhausted {};
 class ControlObjective {
 public:
     // `start`: when the method's clock started (setup such as ray generation counts).
-    ControlObjective(const Scene& run_scene, const ImageD& target_image, int control_x, int control_y, int final_x,
+    ControlObjective(const DesignJob& run_job, const ImageD& target_image, int control_x, int control_y, int final_x,
                      int final_y, std::uint64_t seed, int threads, double budget_seconds, Clock::time_point start)
-        : scene_(run_scene), threads_(threads), budget_(budget_seconds), start_(start),
-          initial_(io::make_initial_heightmap(run_scene, final_x, final_y)), surface_(initial_),
-          rays_(generate_rays(run_scene.light, initial_, run_scene.receiver, seed)),
-          params_(make_path_params(run_scene)),
-          target_(make_target(target_image, run_scene.receiver.width, run_scene.receiver.height, rays_.total)),
-          image_(target_), weights_(objective_weights(run_scene.optimise)),
+        : scene_(run_job.scene), threads_(threads), budget_(budget_seconds), start_(start),
+          initial_(io::make_initial_heightmap(run_job.scene, final_x, final_y)), surface_(initial_),
+          rays_(generate_rays(run_job.scene.light, initial_, run_job.scene.receiver, seed)),
+          params_(make_path_params(run_job.scene)),
+          target_(make_target(target_image, run_job.scene.receiver.width, run_job.scene.receiver.height,
+                              rays_.total)),
+          image_(target_), weights_(run_job.options.objective),
           cx_(control_x), cy_(control_y) {
         if (cx_ < 2 || cy_ < 2) throw InputError("--control: the control grid needs at least 2 x 2 vertices");
         control_ = Heightmap(cx_, cy_, initial_.size(), initial_.h_min(), initial_.h_max(), initial_.frame(),

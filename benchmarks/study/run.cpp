@@ -101,22 +101,23 @@ std::vector<TracePoint> trace_of(const DesignResult& r) {
 // surface is judged below like every other engine's. With --start-only the start alone
 // (the transport surface for a scene with a target, unless the patch asks for another
 // start): "transport-only". Fills `out`, `model` and the trace; returns the surface.
-Heightmap run_design_engine(const Args& a, Scene scene, const ImageD& target, json& out, json& model,
+Heightmap run_design_engine(const Args& a, DesignJob job, const ImageD& target, json& out, json& model,
                             std::vector<TracePoint>& trace, int& trace_levels) {
-    DesignOptions& o = scene.optimise;
+    const Scene& scene = job.scene;
+    DesignOptions& o = job.options;
     o.seed = a.seed;
     o.time_budget = a.time_budget;
     o.threads = a.threads;
     o.progress_every = a.progress_every;
     if (a.kernel_supports > 0) {
-        o.levels = plan_levels(scene);
+        o.levels = plan_levels(scene, o);
         for (auto& l : o.levels) l.kernel_supports = {a.kernel_supports};
     }
     DesignSetup setup;
-    setup.initial = io::load_start_surface(scene);
+    setup.initial = io::load_start_surface(scene, plan_levels(scene, o));
     setup.start_only = a.start_only;
     setup.export_checks = false;
-    CompletedDesign d = design(scene, target, setup);
+    CompletedDesign d = design(job, target, setup);
     DesignResult& r = d.result;
     // The designer's own clock: the start (solve, fit and its exact-tracer check) and the
     // annealing, not the finish's traces.
@@ -142,9 +143,9 @@ Heightmap run_design_engine(const Args& a, Scene scene, const ImageD& target, js
     out["proposals_evaluated"] = proposals;
     out["accepted"] = r.accepted;
     out["stages"] = io::stage_reports_json(r.stages);
-    out["bandit"] = to_string(o.bandit);
+    out["bandit"] = to_string(o.proposals.bandit);
     out["evaluation"] = to_string(o.evaluation);
-    out["kernel_shapes"] = to_string(o.kernel_shapes);
+    out["kernel_shapes"] = to_string(o.proposals.kernel_shapes);
     out["max_iterations"] = o.max_iterations;
     out["stop_reasons"] = json::array();
     for (const auto& s : r.stages) out["stop_reasons"].push_back(to_string(s.stop_reason));
@@ -188,15 +189,17 @@ int run(const Args& a) {
     if (a.kernel_supports != 0 && (a.kernel_supports < 1 || a.kernel_supports % 2 == 0))
         throw InputError("--kernel-supports: must be an odd number >= 1");
 
-    const Scene judge = load_patched_scene(a.scene, {case_patch});
-    Scene run_scene = load_patched_scene(a.scene, {case_patch, method_patch});
+    const DesignJob judge_job = load_patched_job(a.scene, {case_patch});
+    DesignJob run_job = load_patched_job(a.scene, {case_patch, method_patch});
+    const Scene& judge = judge_job.scene;
+    Scene& run_scene = run_job.scene;
     if (!judge.target) throw InputError(a.scene.string() + ": target: the study needs a target");
     const ImageD target = io::load_target_image(judge);
     const ImageD run_target = io::load_target_image(run_scene);
     const int threads = thread_count(exec::omp_t{a.threads});
-    const std::uint64_t eval_seed = a.eval_seed ? *a.eval_seed : judge.optimise.seed;
+    const std::uint64_t eval_seed = a.eval_seed ? *a.eval_seed : judge_job.options.seed;
 
-    auto [nx, ny] = final_mesh_of(run_scene);
+    auto [nx, ny] = final_mesh_of(run_job);
     nx = (nx - 1) * a.mesh_scale + 1;
     ny = (ny - 1) * a.mesh_scale + 1;
     run_scene.surface.nx = nx;
@@ -207,7 +210,7 @@ int run(const Args& a) {
         else
             run_scene.light.rays_per_cell *= a.rays_scale;
     }
-    const auto [case_nx, case_ny] = final_mesh_of(judge);
+    const auto [case_nx, case_ny] = final_mesh_of(judge_job);
 
     json out;
     out["label"] = a.label.empty() ? a.engine : a.label;
@@ -239,11 +242,11 @@ int run(const Args& a) {
     const auto start = Clock::now();
 
     if (a.engine == "design") {
-        result_surface = run_design_engine(a, run_scene, run_target, out, model, trace, trace_levels);
+        result_surface = run_design_engine(a, run_job, run_target, out, model, trace, trace_levels);
     } else {
         if (a.start_only) throw InputError("--start-only: only with --engine design");
         const auto [cx, cy] = control_grid_for(a.control, nx, ny);
-        ControlObjective f(run_scene, run_target, cx, cy, nx, ny, a.seed, a.threads, a.time_budget, start);
+        ControlObjective f(run_job, run_target, cx, cy, nx, ny, a.seed, a.threads, a.time_budget, start);
         json details;
         if (a.engine == "spsa") {
             const SpsaSettings& s = a.spsa;
@@ -297,7 +300,7 @@ int run(const Args& a) {
     out["trace"] = trace_json(trace, trace_levels);
 
     const double alpha = run_scene.surface.phong_alpha;
-    const Evaluation final_eval = evaluate(judge, result_surface, alpha, target, eval_seed, a.threads);
+    const Evaluation final_eval = evaluate(judge_job, result_surface, alpha, target, eval_seed, a.threads);
     out["final"] = evaluation_json(final_eval);
     out["final"]["heights_fingerprint"] = heights_fingerprint(result_surface);
 #if defined(FREEFORM_WITH_EMBREE)
@@ -306,7 +309,7 @@ int run(const Args& a) {
         // design` writes it) traced as flat triangles, same rays.
         Scene fab_scene = judge;
         fab_scene.surface.phong_alpha = alpha;
-        const Fabrication fab = make_fabrication(fab_scene, result_surface);
+        const Fabrication fab = make_fabrication(fab_scene, judge_job.options.exports, result_surface);
         const ExportedGeometry geometry = exported_geometry(fab_scene, result_surface, fab.subdivisions);
         const TraceSetup setup = make_trace_setup(judge, result_surface, &target, eval_seed);
         const ExportedTrace e = trace_exported(exec::omp_t{a.threads}, judge, geometry, setup);
@@ -325,14 +328,14 @@ int run(const Args& a) {
     if (a.check_render) {
         // Judged again on 4x the rays with a fresh jitter: does the design fit the light,
         // or the particular rays it was optimised with?
-        const Evaluation check = evaluate(judge, result_surface, alpha, target, eval_seed + 7919, a.threads, 4.0);
+        const Evaluation check = evaluate(judge_job, result_surface, alpha, target, eval_seed + 7919, a.threads, 4.0);
         out["check"] = evaluation_json(check);
         out["check"]["ray_factor"] = 4;
         out["check"]["seed"] = eval_seed + 7919;
     }
     if (a.compare_tracers) {
 #if defined(FREEFORM_WITH_EMBREE)
-        const Evaluation e = evaluate_embree(judge, result_surface, alpha, target, eval_seed, a.threads);
+        const Evaluation e = evaluate_embree(judge_job, result_surface, alpha, target, eval_seed, a.threads);
         out["embree"] = evaluation_json(e);
 #else
         out["embree"] = nullptr;

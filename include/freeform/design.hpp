@@ -9,6 +9,7 @@
 #include "design/held_out.hpp"
 #include "design/initial.hpp"
 #include "design/machining.hpp"
+#include "design/options.hpp"
 #include "design/pipeline.hpp"
 #include "design/problem.hpp"
 #include "design/render.hpp"

@@ -23,12 +23,12 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     using namespace freeform;
     const Limits limits = fuzz::fuzz_limits();
-    // An absolute directory that need not exist: parse_scene resolves names but opens nothing.
+    // An absolute directory that need not exist: parse_job resolves names but opens nothing.
     const std::filesystem::path base_dir = "/fuzz/scenes";
 
-    std::optional<Scene> scene;
+    std::optional<DesignJob> scene;
     try {
-        scene.emplace(io::parse_scene(fuzz::bytes_of(data, size), "fuzz.json", base_dir, limits));
+        scene.emplace(io::parse_job(fuzz::bytes_of(data, size), "fuzz.json", base_dir, limits));
     } catch (const InputError&) {
         return 0;
     }
@@ -36,10 +36,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     // The round trip: any exception here, InputError included, is a finding.
     std::string written;
     try {
-        const nlohmann::json first = scene_to_json(*scene);
+        const nlohmann::json first = job_to_json(*scene);
         written = first.dump(2);
-        const Scene again = io::parse_scene(written, "roundtrip.json", base_dir, limits);
-        const nlohmann::json second = scene_to_json(again);
+        const DesignJob again = io::parse_job(written, "roundtrip.json", base_dir, limits);
+        const nlohmann::json second = job_to_json(again);
         if (second != first)
             fuzz::property_failed("fuzz_scene", "the re-read scene writes different JSON",
                                   written + "\n----- written again:\n" + second.dump(2));

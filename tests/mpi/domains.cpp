@@ -89,27 +89,30 @@ mpi::ReplicaOptions domains_every(std::int64_t iterations) {
 }
 
 // A small design: 31² mesh on a 40² receiver, flat start, 1,500 iterations a rank.
-Scene small_scene(std::uint64_t seed) {
-    Scene s = testing::basic_scene(40, 8);
+DesignJob small_job(std::uint64_t seed) {
+    DesignJob job{testing::basic_scene(40, 8), {}};
+    Scene& s = job.scene;
     s.surface.nx = s.surface.ny = 31;
     s.receiver.deposit = Deposit::bilinear;
     s.target = TargetSpec{};
     s.surface.initial_shape = InitialShape::flat;
-    s.optimise.seed = seed;
-    s.optimise.time_budget = 0;
-    s.optimise.max_iterations = 1500;
-    s.optimise.threads = 1;
-    return s;
+    DesignOptions& o = job.options;
+    o.seed = seed;
+    o.time_budget = 0;
+    o.max_iterations = 1500;
+    o.threads = 1;
+    return job;
 }
 
 std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& stages, double& error_start,
                                double& error_end) {
     mpi::Replicas replicas(MPI_COMM_WORLD, seed, domains_every(150));
-    const Scene s = small_scene(seed);
+    const DesignJob job = small_job(seed);
+    const Scene& s = job.scene;
     const ImageD target = testing::two_blocks(40, 40);
-    const DesignOptions& o = s.optimise;
+    const DesignOptions& o = job.options;
     const DesignResult r =
-        design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; }, default_penalties(o),
+        design(s, testing::surface_for(s, 31), target, o, [](const DesignProgress&) { return false; }, default_penalties(o.penalties),
                replicas);
     stages = r.stages;
     error_start = r.stages.front().error_start;
@@ -118,7 +121,7 @@ std::vector<float> design_once(std::uint64_t seed, std::vector<StageReport>& sta
 }
 
 void check_mpi_design() {
-    const Scene s = small_scene(13);
+    const DesignJob job = small_job(13);
     const ImageD target = testing::two_blocks(40, 40);
     DesignSetup setup;
     setup.export_checks = false;
@@ -129,7 +132,7 @@ void check_mpi_design() {
         ++layouts;
         expect(int(l.threads.size()) == size && l.threads.front() == 1, "the layout lists every rank's threads");
     };
-    const mpi::ReplicaDesign r = mpi::design(s, target, setup, MPI_COMM_WORLD, rs);
+    const mpi::ReplicaDesign r = mpi::design(job, target, setup, MPI_COMM_WORLD, rs);
     expect(r.design.has_value() == (rank == 0), "rank 0 alone holds the design");
     expect(layouts == (rank == 0 ? 1 : 0), "the layout is handed to rank 0 alone");
     expect(!r.stopped_early, "the design ran to its budget");
@@ -137,11 +140,11 @@ void check_mpi_design() {
            "every rank reports the run: its ranks, merges, and rank 0 winning (one shared surface)");
 
     // The annealing core with the coordinator, on the scene as design() plans it.
-    PlannedDesign plan = plan_design(s);
-    mpi::Replicas replicas(MPI_COMM_WORLD, s.optimise.seed, domains_every(150));
-    const DesignResult core = design(plan.scene, std::move(plan.initial), target, plan.scene.optimise,
+    PlannedDesign plan = plan_design(job);
+    mpi::Replicas replicas(MPI_COMM_WORLD, job.options.seed, domains_every(150));
+    const DesignResult core = design(plan.scene, std::move(plan.initial), target, plan.options,
                                      [](const DesignProgress&) { return false; },
-                                     default_penalties(plan.scene.optimise), replicas);
+                                     default_penalties(plan.options.penalties), replicas);
     if (rank == 0 && r.design) {
         const CompletedDesign& d = *r.design;
         expect(d.result.surface.heights() == core.surface.heights(),
@@ -152,7 +155,7 @@ void check_mpi_design() {
     }
 
     setup.start_only = true;
-    const mpi::ReplicaDesign start = mpi::design(s, target, setup, MPI_COMM_WORLD, rs);
+    const mpi::ReplicaDesign start = mpi::design(job, target, setup, MPI_COMM_WORLD, rs);
     expect(start.design.has_value() == (rank == 0) && !start.replicas && !start.stopped_early,
            "the start alone: rank 0 alone, no replicas");
     if (start.design) expect(start.design->result.iterations == 0, "the start alone is not annealed");

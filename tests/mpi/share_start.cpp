@@ -90,10 +90,10 @@ int main(int argc, char** argv) {
         s.light.rays_per_cell = 8;
         s.target = TargetSpec{};  // starts from the transport surface
         const ImageD target = testing::two_blocks(60, 60);  // a transport start well below flat
-        DesignOptions o = s.optimise;
+        DesignOptions o;
         o.seed = 5;
         o.start_level = 0;  // the first level (15²) runs: the start is fitted again on it
-        const std::vector<LevelPlan> levels = plan_levels(s);
+        const std::vector<LevelPlan> levels = plan_levels(s, o);
         const SurfaceSpec& sp = s.surface;
         const auto make = [&] {
             return prepare_start(s, Heightmap(31, 31, sp.size, sp.h_min, sp.h_max, sp.frame, sp.aperture), target, o,

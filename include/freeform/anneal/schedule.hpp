@@ -62,4 +62,18 @@ struct LinearSchedule {
 static_assert(CoolingSchedule<GeometricSchedule>);
 static_assert(CoolingSchedule<LinearSchedule>);
 
+// The schedule a design anneals each stage with (the scene file's "optimise" keys of the
+// same names; docs/scene.md). The designer turns them into AnnealOptions per stage
+// (design/designer.hpp): a stage's t0 is calibrated so that `initial_acceptance` of its
+// uphill moves pass, then scaled by `initial_temperature_scale`.
+struct ScheduleOptions {
+    double initial_acceptance = 0.03;          // of uphill moves at the start of each stage
+    double refine_initial_acceptance = 0.001;  // ... at most, after a transport start
+    double initial_temperature_scale = 1;      // multiplies every stage's calibrated t0
+    double cooling = 0.95;
+    int temperature_steps = 120;               // cooling steps per stage
+    double reheat_factor = 0.5;
+    double patience_fraction = 0.08;  // re-heat after this fraction of a stage without a new best
+};
+
 }  // namespace freeform

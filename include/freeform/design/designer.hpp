@@ -31,14 +31,12 @@
 #include "../surface/tool.hpp"
 #include "../trace/setup.hpp"
 #include "held_out.hpp"
+#include "options.hpp"
 #include "problem.hpp"
 #include "replicas.hpp"
 #include "start.hpp"
 
 namespace freeform {
-
-// The designer's settings are the scene's "optimise" block (scene/scene.hpp).
-using DesignOptions = OptimiseSpec;
 
 // What a design reports at each progress call.
 struct DesignProgress {
@@ -148,7 +146,7 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
 //   receiver: 51², 101², 201² on 50, 100, 200 px; the reference had 25² → 101²); one level
 //   when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
-inline std::vector<LevelPlan> plan_levels(const Scene& scene) {
+inline std::vector<LevelPlan> plan_levels(const Scene& scene, const DesignOptions& options) {
     const int rx = scene.receiver.width, ry = scene.receiver.height, r = std::max(rx, ry);
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
@@ -165,7 +163,7 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene) {
         LevelPlan l;
         l.mesh_x = mx, l.mesh_y = my, l.resolution_x = x, l.resolution_y = y;
         levels.insert(levels.begin(), l);
-        if (!scene.optimise.multilevel || levels.size() >= 3 || std::min(x, y) / 2 < 25 ||
+        if (!options.multilevel || levels.size() >= 3 || std::min(x, y) / 2 < 25 ||
             coarser(std::max(mx, my)) < 7)
             break;
         mx = coarser(mx), my = coarser(my), x /= 2, y /= 2;
@@ -183,7 +181,9 @@ inline std::pair<int, int> final_mesh(const Scene& scene, const std::vector<Leve
     return {levels.back().mesh_x, levels.back().mesh_y};
 }
 
-inline std::pair<int, int> final_mesh(const Scene& scene) { return final_mesh(scene, plan_levels(scene)); }
+inline std::pair<int, int> final_mesh(const Scene& scene, const DesignOptions& options) {
+    return final_mesh(scene, plan_levels(scene, options));
+}
 
 // The scene's receiver at a level's resolution (the same plane: frame and size).
 inline Receiver level_receiver(const Receiver& receiver, const LevelPlan& level) {
@@ -195,7 +195,7 @@ inline Receiver level_receiver(const Receiver& receiver, const LevelPlan& level)
 
 // The rays per receiver cell a design fits its final level to: the light's own, raised
 // so that every cell of the final mesh (nx × ny vertices) has at least
-// optimise.min_rays_per_mesh_cell rays on average (32 by default). A mesh with few rays
+// `min_rays_per_mesh_cell` rays on average (optimise.min_rays_per_mesh_cell, 32 by default). A mesh with few rays
 // per cell can steer single rays from cell to cell, and a design then fits the sampling
 // noise of its rays rather than the light: judged by cell means (error_physical,
 // docs/measures.md) the headlight (53² mesh on 50² px, 14 rays per mesh cell at 16 per
@@ -206,12 +206,12 @@ inline Receiver level_receiver(const Receiver& receiver, const LevelPlan& level)
 // 64: 0.0442 / 0.0405 / 0.0365, too few moves) and the grey landscape. Unchanged when the
 // light gives a fixed `rays` count, and for meshes that are coarse for their receiver
 // (101² on 200² px has 64 already).
-inline double fitting_rays_per_cell(const Scene& scene, int nx, int ny) {
+inline double fitting_rays_per_cell(const Scene& scene, double min_rays_per_mesh_cell, int nx, int ny) {
     const Light& light = scene.light;
-    if (light.rays > 0 || !(scene.optimise.min_rays_per_mesh_cell > 0)) return light.rays_per_cell;
+    if (light.rays > 0 || !(min_rays_per_mesh_cell > 0)) return light.rays_per_cell;
     const double mesh_cells = double(std::max(nx - 1, 1)) * double(std::max(ny - 1, 1));
     return std::max(light.rays_per_cell,
-                    std::ceil(scene.optimise.min_rays_per_mesh_cell * mesh_cells / double(scene.receiver.cells())));
+                    std::ceil(min_rays_per_mesh_cell * mesh_cells / double(scene.receiver.cells())));
 }
 
 // How many of the planned coarse levels a design starting at error `start_error` (the
@@ -258,23 +258,6 @@ inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const Im
     return shared;
 }
 
-// The weight of the tool-radius term when the surface has a tool_radius: a vertex whose
-// concave curvature is twice what the tool can cut costs as much as an error of 1 in the
-// mean over the grid divided by the vertex count, i.e. a few such vertices matter.
-inline constexpr double tool_radius_weight = 1.0;
-
-// The penalty terms the options ask for, and the milling tool's when `tool_radius` > 0
-// (surface.tool_radius); add terms of your own to it and pass it to design()
-// (objective/penalty.hpp: any type modelling LocalHeightTerm).
-inline Penalties default_penalties(const DesignOptions& o, double tool_radius = 0) {
-    Penalties p;
-    p.add(HeightBoundTerm{}, o.height_bound_weight);
-    p.add(ValleyTerm{o.valley_min_angle}, o.valley_weight);
-    p.add(SmoothnessTerm{}, o.smoothness_weight);
-    if (tool_radius > 0) p.add(ToolRadiusTerm{tool_radius}, tool_radius_weight);
-    return p;
-}
-
 namespace design_detail {
 
 // Metres of kernel amplitude per receiver cell of light displacement per grid unit.
@@ -290,7 +273,7 @@ inline double amplitude_unit(const Scene& scene, const Receiver& rec, const Heig
 
 // The kernel bank of a stage; `kept` (when not empty) lists the shapes the bandit's
 // pre-process kept (indices into default_kernel_bank, the same at every support).
-inline ProposalSettings proposals_for(const DesignOptions& o, int support, const std::vector<int>& kept = {}) {
+inline ProposalSettings proposals_for(const ProposalOptions& o, int support, const std::vector<int>& kept = {}) {
     ProposalSettings p;
     p.single_vertex = o.single_vertex;
     p.error_guided = o.error_guided;
@@ -552,7 +535,7 @@ struct DesignState {
                 Replicas& r)
         : scene(s), target_image(target), options(o), callback(c), penalties(p), replicas(r),
           timed(o.time_budget > 0 && o.max_iterations == 0),
-          weights{o.sobel_weight, o.energy_threshold, o.lost_light_weight} {}
+          weights(o.objective) {}
 
     const Scene& scene;
     const ImageD& target_image;
@@ -692,26 +675,26 @@ void keep_trace(LevelSetup& L, BasicSurfaceProblem<Backend>& problem) {
 
 template <class State>
 bool wants_preprocess(const State& d, std::size_t li, std::size_t si) {
-    const DesignOptions& o = d.options;
-    return li == 0 && si == 0 && o.bandit == BanditKind::history && !o.single_vertex &&
-           o.kernel_shapes != KernelShapes::isotropic && o.preprocess_iterations > 0 && o.preprocess_keep > 0;
+    const ProposalOptions& p = d.options.proposals;
+    return li == 0 && si == 0 && p.bandit == BanditKind::history && !p.single_vertex &&
+           p.kernel_shapes != KernelShapes::isotropic && p.preprocess_iterations > 0 && p.preprocess_keep > 0;
 }
 
 // The history bandit's pre-process (reference §4.3.2): a short run with every shape
 // equally likely, then only the shapes that paid best are kept (d.kept_arms).
 template <class Backend, class State>
 void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) {
-    ProposalSettings all = proposals_for(d.moves, support);
+    ProposalSettings all = proposals_for(d.moves.proposals, support);
     const int arms = int(all.bank.size());
     auto pre =
-        make_problem<Backend>(d, L, std::move(all), make_bandit(BanditKind::uniform, arms, d.options.bandit_sync));
-    const auto cal = calibrate(pre, hash_combine(stage_seed, 1), d.moves.initial_acceptance, d.timed);
+        make_problem<Backend>(d, L, std::move(all), make_bandit(BanditKind::uniform, arms, d.options.proposals.bandit_sync));
+    const auto cal = calibrate(pre, hash_combine(stage_seed, 1), d.moves.schedule.initial_acceptance, d.timed);
     pre.set_reference_temperature(cal.temperature);
     AnnealOptions po;
     po.seed = hash_combine(stage_seed, 2);
     po.initial_temperature = cal.temperature;
     po.cooling = 1.0;
-    po.max_iterations = d.options.preprocess_iterations;
+    po.max_iterations = d.options.proposals.preprocess_iterations;
     po.time_budget = d.options.time_budget > 0 ? 0.05 * d.options.time_budget : 0;
     po.threads = 1;
     const AnnealResult pr = anneal(pre, po);
@@ -722,7 +705,7 @@ void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) 
         const auto pulls = pre.bandit().pulls()[std::size_t(a)];
         rate[std::size_t(a)] = pulls > 0 ? pre.bandit().total_rewards()[std::size_t(a)] / double(pulls) : 0.0;
     }
-    d.kept_arms = HistoryBandit::preselect(rate, std::min(d.options.preprocess_keep, arms));
+    d.kept_arms = HistoryBandit::preselect(rate, std::min(d.options.proposals.preprocess_keep, arms));
     std::sort(d.kept_arms.begin(), d.kept_arms.end());
     d.result.preprocess_rates = rate;
     keep_trace(L, pre);
@@ -762,17 +745,17 @@ AnnealOptions stage_options(const State& d, const LevelSetup& L, std::size_t si,
     AnnealOptions ao;
     ao.seed = d.replicas.anneal_seed(stage_seed);
     ao.initial_temperature = t0;
-    ao.cooling = o.cooling;
+    ao.cooling = o.schedule.cooling;
     const int speculative = o.speculative > 0 ? o.speculative : d.threads;
     const std::int64_t budget = stage_budget(d, L, si, moves_per_second, stage_time, speculative);
     ao.max_iterations = budget;
-    ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, o.temperature_steps));
+    ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, o.schedule.temperature_steps));
     // The last stage of a time-budgeted run goes on until the time is up: its budget,
     // fitted to the speed the calibration measured, often runs out first (letter E,
     // 20 s: at 17.9 s), and the schedule simply cools on past it.
     if (d.timed && d.design_last(L, si)) ao.max_iterations = std::numeric_limits<std::int64_t>::max() / 4;
-    ao.patience = std::max<std::int64_t>(100, std::int64_t(o.patience_fraction * double(budget)));
-    ao.reheat_factor = o.reheat_factor;
+    ao.patience = std::max<std::int64_t>(100, std::int64_t(o.schedule.patience_fraction * double(budget)));
+    ao.reheat_factor = o.schedule.reheat_factor;
     ao.time_budget = o.time_budget > 0 ? stage_time : 0;
     if (o.target_error > 0) ao.target_energy = o.target_error;
     ao.speculative = speculative;
@@ -832,7 +815,7 @@ StageReport stage_report_start(const State& d, const LevelSetup& L, int support,
     report.mesh_y = L.plan->mesh_y;
     report.resolution_x = L.receiver.width;
     report.resolution_y = L.receiver.height;
-    report.kernel_support = d.options.single_vertex ? 1 : support;
+    report.kernel_support = d.options.proposals.single_vertex ? 1 : support;
     report.initial_temperature = t0;
     report.error_start = problem.value().error;
     report.rays = L.trace_setup.rays.size();
@@ -874,7 +857,7 @@ void end_stage(State& d, const Problem& problem, const AnnealResult& ar, StageRe
     report.error_end = problem.value().error;
     report.energy_end = problem.value().energy;
     report.objective_end = problem.value().total;
-    report.bandit_weights = d.options.single_vertex ? std::vector<double>{} : problem.bandit().weights();
+    report.bandit_weights = d.options.proposals.single_vertex ? std::vector<double>{} : problem.bandit().weights();
     d.result.stages.push_back(report);
     // With replicas, every replica goes on to the next stage, or none does.
     d.result.stopped_early = d.replicas.any(stopped);
@@ -901,12 +884,12 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports[si];
     const std::uint64_t stage_seed = hash_combine(d.options.seed, L.index * 16 + si);
     if (wants_preprocess(d, L.index, si)) preprocess<Backend>(d, L, support, stage_seed);
-    ProposalSettings ps = proposals_for(d.moves, support, d.kept_arms);
+    ProposalSettings ps = proposals_for(d.moves.proposals, support, d.kept_arms);
     const int arms = std::max<int>(1, int(ps.bank.size()));
-    auto problem = make_problem<Backend>(d, L, ps, make_bandit(d.options.bandit, arms, d.options.bandit_sync));
-    const Calibration cal = calibrate(problem, stage_seed, d.moves.initial_acceptance, d.timed);
+    auto problem = make_problem<Backend>(d, L, ps, make_bandit(d.options.proposals.bandit, arms, d.options.proposals.bandit_sync));
+    const Calibration cal = calibrate(problem, stage_seed, d.moves.schedule.initial_acceptance, d.timed);
     // Identity for one replica.
-    const double t0 = d.replicas.common_temperature(cal.temperature * d.options.initial_temperature_scale);
+    const double t0 = d.replicas.common_temperature(cal.temperature * d.options.schedule.initial_temperature_scale);
     problem.set_reference_temperature(t0);
     // Replicas that share one surface each move their own strip of it (after the
     // calibration, which every replica makes on the whole surface alike).
@@ -988,11 +971,7 @@ class Designer {
 
   private:
     // The levels plan_levels gives the scene with these options.
-    std::vector<LevelPlan> plan_here() const {
-        Scene planned = d_.scene;
-        planned.optimise = d_.options;
-        return plan_levels(planned);
-    }
+    std::vector<LevelPlan> plan_here() const { return plan_levels(d_.scene, d_.options); }
 
     // The levels, the start, and the levels the start leaves to run.
     void schedule(Heightmap initial) {
@@ -1021,9 +1000,11 @@ class Designer {
         // first, hottest iterations do not undo the layout the start already has.
         d_.moves = o;
         if (start.transport) {
-            d_.moves.max_shift_cells = std::min(o.max_shift_cells, o.refine_max_shift_cells);
-            d_.moves.min_shift_cells = std::min(o.min_shift_cells, d_.moves.max_shift_cells);
-            d_.moves.initial_acceptance = std::min(o.initial_acceptance, o.refine_initial_acceptance);
+            ProposalOptions& p = d_.moves.proposals;
+            p.max_shift_cells = std::min(o.proposals.max_shift_cells, o.proposals.refine_max_shift_cells);
+            p.min_shift_cells = std::min(o.proposals.min_shift_cells, p.max_shift_cells);
+            d_.moves.schedule.initial_acceptance =
+                std::min(o.schedule.initial_acceptance, o.schedule.refine_initial_acceptance);
         }
         d_.surface = std::move(start.surface);
     }
@@ -1070,12 +1051,12 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 // (relative irradiance, any resolution). `callback(const DesignProgress&)` is called
 // every options.progress_every iterations and may return true to stop (the best state
 // so far is kept). options.evaluation picks incremental (default) or full retraces.
-// `penalties` replaces the height terms the options ask for (default_penalties(options))
+// `penalties` replaces the height terms the options ask for (default_penalties(options.penalties))
 // when a caller adds terms of its own.
 //
 // `replicas` makes this design one replica of several (replicas.hpp); SingleReplica, the
-// default, is the plain design. `planned`, when given, is plan_levels(scene) with
-// `options` as its optimise block (PlannedDesign::levels): the levels are then not
+// default, is the plain design. `planned`, when given, is plan_levels(scene, options)
+// (PlannedDesign::levels): the levels are then not
 // planned again; options.levels, when set, still replaces them.
 template <class Callback, ReplicaCoordinator Replicas>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
@@ -1102,7 +1083,7 @@ template <class Callback>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback) {
     return design(scene, std::move(initial), target_image, options, std::forward<Callback>(callback),
-                  default_penalties(options, scene.surface.tool_radius));
+                  default_penalties(options.penalties, scene.surface.tool_radius));
 }
 
 }  // namespace freeform

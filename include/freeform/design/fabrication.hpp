@@ -24,6 +24,7 @@
 #include "../scene/scene.hpp"
 #include "../surface/export.hpp"
 #include "../surface/heightmap.hpp"
+#include "options.hpp"
 
 namespace freeform {
 
@@ -66,14 +67,15 @@ inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
     return blank;
 }
 
-// δ_max of the header (radians) for a scene.
-inline double facet_normal_tolerance(const Scene& scene) {
+// δ_max of the header (radians) for a scene, with tol = `tolerance_cells`
+// (ExportOptions::tolerance).
+inline double facet_normal_tolerance(const Scene& scene, double tolerance_cells) {
     const Receiver& r = scene.receiver;
     const double cell = std::min(r.size.x / r.width, r.size.y / r.height);
     const double distance = std::max(length(r.frame.origin - scene.surface.frame.origin), 1e-9);
     const auto* lens = std::get_if<Lens>(&scene.surface.material);
     const double gain = lens ? std::max(lens->ior - 1.0, 0.05) : 2.0;
-    return scene.optimise.export_tolerance * cell / (gain * distance);
+    return tolerance_cells * cell / (gain * distance);
 }
 
 struct Fabrication {
@@ -114,19 +116,19 @@ inline int subdivisions_for_triangles(const Heightmap& surface, std::int64_t max
     return std::max(1, int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))));
 }
 
-inline Fabrication make_fabrication(const Scene& scene, const Heightmap& surface) {
+inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& options, const Heightmap& surface) {
     Fabrication f;
     const double alpha = scene.surface.phong_alpha;
-    f.normal_tolerance = facet_normal_tolerance(scene);
-    f.automatic = scene.optimise.export_subdivisions <= 0;
+    f.normal_tolerance = facet_normal_tolerance(scene, options.tolerance);
+    f.automatic = options.subdivisions <= 0;
     if (f.automatic) {
         const int max_k = std::min(max_auto_subdivisions,
-                                   subdivisions_for_triangles(surface, scene.optimise.export_max_triangles));
+                                   subdivisions_for_triangles(surface, options.max_triangles));
         const SubdivisionChoice c = subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_k);
         f.subdivisions = c.k;
         f.normal_error = c.normal_error;
     } else {
-        f.subdivisions = scene.optimise.export_subdivisions;
+        f.subdivisions = options.subdivisions;
         f.normal_error = tessellation_normal_error(surface, alpha, f.subdivisions, 0.9);
     }
     f.tolerance_met = f.normal_error <= f.normal_tolerance;

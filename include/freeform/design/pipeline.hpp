@@ -5,17 +5,18 @@
 // command is this call plus argument parsing and writing files; a program that includes
 // the library gets the same design from the same scene.
 //
-//     const freeform::Scene scene = freeform::io::load_scene("letter-e.json");
-//     const freeform::CompletedDesign d = freeform::design(scene, freeform::io::load_target_image(scene));
+//     const freeform::DesignJob job = freeform::io::load_job("letter-e.json");
+//     const freeform::CompletedDesign d = freeform::design(job, freeform::io::load_target_image(job.scene));
 //     freeform::io::write_stl("letter-e.stl", d.exported.fabrication.mesh);
 //
-// One entry point, design(scene, target, setup), one result, CompletedDesign. A
+// One entry point, design(job, target, setup), one result, CompletedDesign. A
 // DesignSetup (below) carries what a caller may change: callbacks, penalty terms of its
 // own, a start surface of its own, the start alone. mpi::design (freeform/mpi/design.hpp,
 // freeform::mpi) is the same call over MPI ranks. Its parts, for callers that compose
 // their own: plan_design, finish_design, and the annealing core (design/designer.hpp).
 //
-// No I/O here: the scene, its target image and (when the scene starts from a PFM file)
+// A job is a scene and its design options (design/options.hpp). No I/O here: the job, its
+// target image and (when the scene starts from a PFM file)
 // the start surface come in loaded (io/scene_file.hpp, io/target.hpp, io/heightmap.hpp).
 #include <chrono>
 #include <cstdint>
@@ -40,6 +41,7 @@
 #include "fabrication.hpp"
 #include "initial.hpp"
 #include "machining.hpp"
+#include "options.hpp"
 #include "start.hpp"
 #if defined(FREEFORM_WITH_EMBREE)
 #include "exported.hpp"
@@ -58,12 +60,13 @@ struct DesignCallbacks {
     std::function<void(const std::string&)> phase;
 };
 
-// A scene made ready to design: its levels, planned once, its rays raised for the final
+// A job made ready to design: its levels, planned once, its rays raised for the final
 // mesh (optimise.min_rays_per_mesh_cell) and the surface the design starts from.
 struct PlannedDesign {
     Scene scene;  // the effective scene: what metrics.json records
+    DesignOptions options;
     Heightmap initial;
-    std::vector<LevelPlan> levels;  // plan_levels(scene): the final mesh and the designer's schedule
+    std::vector<LevelPlan> levels;  // plan_levels(scene, options): the final mesh and the designer's schedule
 };
 
 // Throws InputError, naming the key, for a scene that cannot be designed.
@@ -73,17 +76,20 @@ inline void check_designable(const Scene& scene) {
         throw InputError("meshes: designing with extra meshes is not supported yet (render them with the Embree tracer)");
 }
 
-// Checks that `scene` can be designed and plans it. `initial` replaces the scene's start
-// (a surface read from a file); without it a scene whose start is a PFM file is refused.
-// `levels`: plan_levels(scene), when the caller has planned them already (to check the
-// memory they need before any surface is made, as the command line does).
-inline PlannedDesign plan_design(const Scene& scene, std::optional<Heightmap> initial = {},
+// Checks that the job's scene can be designed and plans it. `initial` replaces the scene's
+// start (a surface read from a file); without it a scene whose start is a PFM file is
+// refused. `levels`: plan_levels(scene, options), when the caller has planned them
+// already (to check the memory they need before any surface is made, as the command
+// line does).
+inline PlannedDesign plan_design(const DesignJob& job, std::optional<Heightmap> initial = {},
                                  std::optional<std::vector<LevelPlan>> levels = {}) {
+    const Scene& scene = job.scene;
     check_designable(scene);
-    PlannedDesign p{scene, Heightmap{}, levels ? std::move(*levels) : plan_levels(scene)};
+    PlannedDesign p{scene, job.options, Heightmap{},
+                    levels ? std::move(*levels) : plan_levels(scene, job.options)};
     const auto [nx, ny] = final_mesh(scene, p.levels);
     // Enough rays for the final mesh: the design, its checks and its final render use them.
-    p.scene.light.rays_per_cell = fitting_rays_per_cell(scene, nx, ny);
+    p.scene.light.rays_per_cell = fitting_rays_per_cell(scene, job.options.min_rays_per_mesh_cell, nx, ny);
     if (initial) {
         p.initial = std::move(*initial);
     } else {
@@ -156,15 +162,15 @@ inline CellMeanOptions physical_cell_mean_options(std::uint64_t seed) {
     return o;
 }
 
-inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, const TracedDesign& fitted,
-                                 const ImageD& target, int threads) {
-    ExportChecks c{make_fabrication(scene, surface), {}, {}, {}, {}, {}, {}, {}, {}};
+inline ExportChecks check_export(const Scene& scene, const DesignOptions& options, const Heightmap& surface,
+                                 const TracedDesign& fitted, const ImageD& target, int threads) {
+    ExportChecks c{make_fabrication(scene, options.exports, surface), {}, {}, {}, {}, {}, {}, {}, {}};
     c.machining = machining_report(scene, surface, c.fabrication.mesh);
     // The smooth forms cover the exported top: a lens's rim too (export_blank).
     const Heightmap top = export_blank(scene, surface);
     c.spline = fit_bspline(top, scene.surface.phong_alpha, spline_samples_per_cell);
     c.spline_fit = check_spline_fit(c.spline, top, scene.surface.phong_alpha, spline_samples_per_cell);
-    c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(scene.optimise.seed), threads);
+    c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(options.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)
     const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
     const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted);
@@ -172,7 +178,7 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
     c.energy_exported = et.totals.energy();
     c.l1_to_design = l1_error(et.histogram.cells, fitted.histogram.cells, fitted.rays.total);
     c.cells = exported_cell_means(exec::omp_t{threads}, scene, surface, geometry, &target,
-                                  physical_cell_mean_options(scene.optimise.seed));
+                                  physical_cell_mean_options(options.seed));
 #else
     (void)fitted;
 #endif
@@ -182,6 +188,7 @@ inline ExportChecks check_export(const Scene& scene, const Heightmap& surface, c
 // A finished design: the surface as it is milled, and every figure metrics.json reports.
 struct CompletedDesign {
     Scene scene;           // the effective scene (rays per cell raised for the final mesh)
+    DesignOptions options;  // the options it was designed with
     DesignResult result;   // result.surface: after smoothing and the tool's cut
     TracedDesign fitted;   // traced with the scene's seed: the rays it was fitted to
     std::optional<double> error_held_out;  // with the final level's held-out rays (checks on)
@@ -202,33 +209,33 @@ struct CompletedDesign {
 // Smooths (optimise.smooth_iterations), cuts with the tool (surface.tool_radius) and
 // judges an annealed design: the fitted and held-out errors, the export and its cell means
 // (`export_checks`: DesignSetup::export_checks).
-inline CompletedDesign finish_design(const Scene& scene, DesignResult result, const ImageD& target,
-                                     const DesignCallbacks& callbacks = {}, bool export_checks = true) {
+inline CompletedDesign finish_design(const Scene& scene, const DesignOptions& options, DesignResult result,
+                                     const ImageD& target, const DesignCallbacks& callbacks = {},
+                                     bool export_checks = true) {
     const auto t0 = std::chrono::steady_clock::now();
-    const DesignOptions& options = scene.optimise;
     if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
     // The tool's cut last of all: every figure describes what the mill leaves.
     if (scene.surface.tool_radius > 0)
         result.tool_cut = std::max(result.tool_cut, cut_with_ball(result.surface, scene.surface.tool_radius));
     const int threads = options.threads;
-    CompletedDesign d{scene, std::move(result), {}, std::nullopt, {}};
+    CompletedDesign d{scene, options, std::move(result), {}, std::nullopt, {}};
     d.fitted = trace_design(scene, d.result.surface, target, options.seed, threads);
     if (d.result.held_out.total >= 0)
         d.error_held_out = trace_design(scene, d.result.surface, target, d.result.held_out_seed, threads).error;
     if (export_checks) {
         if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
-        d.exported = check_export(scene, d.result.surface, d.fitted, target, threads);
+        d.exported = check_export(scene, options, d.result.surface, d.fitted, target, threads);
     }
     d.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return d;
 }
 
 // How a design runs: what the caller hears, and what it changes. Every field may be left
-// as it is: `design(scene, target)` is `freeform design`.
+// as it is: `design(job, target)` is `freeform design`.
 struct DesignSetup {
     DesignCallbacks callbacks;
     // The height terms of the objective (objective/penalty.hpp). Empty: the terms the
-    // scene's options ask for, default_penalties(scene.optimise, scene.surface.tool_radius).
+    // job's options ask for, default_penalties(options.penalties, scene.surface.tool_radius).
     // To add a term of your own, start from those and add it (docs/library.md, "A custom
     // term"); a Penalties given here replaces them whole.
     std::optional<Penalties> penalties;
@@ -252,8 +259,8 @@ namespace pipeline_detail {
 // The start of a planned design alone, as a DesignResult of no iterations.
 inline DesignResult start_only(PlannedDesign& plan, const ImageD& target) {
     const auto t0 = std::chrono::steady_clock::now();
-    DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.scene.optimise.seed,
-                                          thread_count(exec::omp_t{plan.scene.optimise.threads}));
+    DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.options.seed,
+                                          thread_count(exec::omp_t{plan.options.threads}));
     DesignResult result;
     result.start = start.report;
     result.start.plan = "the start only: no annealing";
@@ -269,17 +276,17 @@ template <ReplicaCoordinator Replicas>
 DesignResult anneal(PlannedDesign& plan, const ImageD& target, const DesignSetup& setup, Replicas& replicas) {
     const DesignCallbacks& callbacks = setup.callbacks;
     const auto progress = [&](const DesignProgress& p) { return callbacks.progress ? callbacks.progress(p) : false; };
-    const DesignOptions& options = plan.scene.optimise;
+    const DesignOptions& options = plan.options;
     return freeform::design(plan.scene, std::move(plan.initial), target, options, progress,
                             setup.penalties ? *setup.penalties
-                                            : default_penalties(options, plan.scene.surface.tool_radius),
+                                            : default_penalties(options.penalties, plan.scene.surface.tool_radius),
                             replicas, &plan.levels);
 }
 
 // The finish the setup asks for (finish_design).
 inline CompletedDesign finish(const PlannedDesign& plan, DesignResult result, const ImageD& target,
                               const DesignSetup& setup) {
-    return finish_design(plan.scene, std::move(result), target, setup.callbacks, setup.export_checks);
+    return finish_design(plan.scene, plan.options, std::move(result), target, setup.callbacks, setup.export_checks);
 }
 
 }  // namespace pipeline_detail
@@ -301,14 +308,14 @@ inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const De
     return pipeline_detail::finish(plan, std::move(result), target, setup);
 }
 
-// Designs `scene` so that its light matches `target` (relative irradiance, any
+// Designs the job's scene with its options so that its light matches `target` (relative irradiance, any
 // resolution: io::load_target_image makes it from the scene's target block): plans it
 // (plan_design), makes the start, anneals, and finishes the result (finish_design). The
 // one entry point of a design (the overload above is it with the plan made by the
 // caller); mpi::design (freeform/mpi/design.hpp) is the same over MPI ranks. Throws
 // InputError for a scene that cannot be designed.
-inline CompletedDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup = {}) {
-    return design(plan_design(scene, setup.initial), target, setup);
+inline CompletedDesign design(const DesignJob& job, const ImageD& target, const DesignSetup& setup = {}) {
+    return design(plan_design(job, setup.initial), target, setup);
 }
 
 }  // namespace freeform

@@ -36,6 +36,7 @@
 #include "../trace/setup.hpp"
 #include "cell_means.hpp"
 #include "initial.hpp"
+#include "options.hpp"
 #include "pipeline.hpp"
 #include "start.hpp"
 #if defined(FREEFORM_WITH_EMBREE)
@@ -70,6 +71,11 @@ struct RenderRequest {
     TracerChoice tracer = TracerChoice::automatic;
     bool mesh_normals = false;  // shade meshes with interpolated vertex normals (not physical)
     int threads = 0;            // 0: every core
+    // The scene file's design options (its "optimise" block). A render reads two: `seed`
+    // (the rays' jitter, the start) and `min_rays_per_mesh_cell` (a surface is rendered
+    // with the rays a design on its grid fits, fitting_rays_per_cell); the result keeps
+    // all of them, so that its effective scene reads back as the same job.
+    DesignOptions options;
 };
 
 // Rays traced so far of those the current pass traces; a render makes one pass for its
@@ -81,7 +87,8 @@ struct RenderCallbacks {
 };
 
 struct RenderResult {
-    Scene scene;  // the effective scene: rays per cell as traced
+    Scene scene;            // the effective scene: rays per cell as traced
+    DesignOptions options;  // RenderRequest::options
     TracerDecision decision;
     Heightmap surface;                 // what was traced (the start, when it was found)
     std::optional<StartReport> start;  // the scene's start was found (transport)
@@ -205,37 +212,42 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
         scene.meshes.empty()) {
         if (callbacks.phase) callbacks.phase(finding_the_start(scene));
         if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, job.surface);
-        DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, scene.optimise.seed, r.threads);
+        DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, job.options.seed, r.threads);
         r.start = st.report;
         job.surface = std::move(st.surface);
     }
     // A surface (the scene's or a height map) is traced with the rays a design on its grid
     // fits (optimise.min_rays_per_mesh_cell), so a design's height map renders to its error.
-    if (!job.mesh) scene.light.rays_per_cell = fitting_rays_per_cell(scene, job.surface.nx(), job.surface.ny());
+    if (!job.mesh)
+        scene.light.rays_per_cell =
+            fitting_rays_per_cell(scene, job.options.min_rays_per_mesh_cell, job.surface.nx(), job.surface.ny());
 
     const TraceSetup setup =
-        make_trace_setup(scene, job.surface, job.target ? &*job.target : nullptr, scene.optimise.seed);
+        make_trace_setup(scene, job.surface, job.target ? &*job.target : nullptr, job.options.seed);
     r.rays = setup.rays.size();
     r.seconds =
         render_detail::trace_job(job, r.decision.tracer, scene, setup, r.threads, callbacks, r.histogram, r.totals);
     if (job.target) {
         r.error = l1_error(r.histogram, setup.target);
         r.cells = converged_cell_means(
-            scene, job.surface, &*job.target, physical_cell_mean_options(scene.optimise.seed),
+            scene, job.surface, &*job.target, physical_cell_mean_options(job.options.seed),
             [&](const Scene& sc, const TraceSetup& batch, Histogram& h, TraceTotals& tt) {
                 render_detail::trace_job(job, r.decision.tracer, sc, batch, r.threads, callbacks, h, tt);
             });
     }
     r.scene = std::move(job.scene);
+    r.options = std::move(job.options);
     r.surface = std::move(job.surface);
     return r;
 }
 
-// A height map under the scene's light, judged against `target` when one is given.
-inline RenderResult render(const Scene& scene, Heightmap surface, std::optional<ImageD> target = {},
-                           const RenderCallbacks& callbacks = {}) {
+// A height map under the scene's light, judged against `target` when one is given, with
+// the seed and the rays per mesh cell of `options` (a design's: CompletedDesign::options).
+inline RenderResult render(const Scene& scene, const DesignOptions& options, Heightmap surface,
+                           std::optional<ImageD> target = {}, const RenderCallbacks& callbacks = {}) {
     RenderRequest job;
     job.scene = scene;
+    job.options = options;
     job.surface = std::move(surface);
     job.target = std::move(target);
     return render(std::move(job), callbacks);

@@ -44,28 +44,30 @@ inline double rays_at(const Light& light, double rays_per_cell, double cells) {
 
 }  // namespace detail
 
-// The plan of a `kind` run of `scene` on `threads` workers (0: count them as 64). The
+// The plan of a `kind` run of the job's scene on `threads` workers (0: count them as 64). The
 // design's levels are `levels` (plan_levels of the scene, PlannedDesign::levels) or, when
 // null, planned here; a render traces the light's rays once and, when the scene has a
 // target, the cell means of what it rendered (design/cell_means.hpp).
-inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads,
+inline ResourcePlan plan_resources(const DesignJob& job, RunKind kind, int threads,
                                    const std::vector<LevelPlan>* levels = nullptr) {
+    const Scene& scene = job.scene;
+    const DesignOptions& options = job.options;
     const double workers = threads > 0 ? threads : 64;
     const double cells = double(scene.receiver.width) * double(scene.receiver.height);
     ResourcePlan plan;
     double peak_rays = 0, mesh_vertices = double(std::max(scene.surface.nx, 3)) * double(std::max(scene.surface.ny, 3));
     if (kind == RunKind::design) {
-        for (const LevelPlan& l : levels ? *levels : plan_levels(scene)) {
+        for (const LevelPlan& l : levels ? *levels : plan_levels(scene, options)) {
             const double level_cells = double(l.resolution_x) * double(l.resolution_y);
-            const double per_cell = std::max({scene.light.rays_per_cell, scene.optimise.coarse_rays_per_cell,
-                                              fitting_rays_per_cell(scene, l.mesh_x, l.mesh_y)});
+            const double per_cell = std::max({scene.light.rays_per_cell, options.coarse_rays_per_cell,
+                                              fitting_rays_per_cell(scene, options.min_rays_per_mesh_cell, l.mesh_x, l.mesh_y)});
             peak_rays = std::max(peak_rays, detail::rays_at(scene.light, per_cell, level_cells));
             mesh_vertices = std::max(mesh_vertices, double(l.mesh_x) * double(l.mesh_y));
         }
     } else {
         // A render of the surface uses the design's last-level rays (fitting_rays_per_cell).
         const double per_cell = scene.surface.nx > 0 && scene.surface.ny > 0
-                                    ? fitting_rays_per_cell(scene, scene.surface.nx, scene.surface.ny)
+                                    ? fitting_rays_per_cell(scene, options.min_rays_per_mesh_cell, scene.surface.nx, scene.surface.ny)
                                     : scene.light.rays_per_cell;
         peak_rays = detail::rays_at(scene.light, std::max(per_cell, scene.light.rays_per_cell), cells);
     }
@@ -74,7 +76,7 @@ inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads
         cells * (scene.target || kind == RunKind::design ? cell_means.rays_per_cell : cell_means.max_rays_per_cell);
     const double export_triangles =
         kind == RunKind::design
-            ? std::min(double(scene.optimise.export_max_triangles), 2.0 * mesh_vertices * 16.0 * 16.0)
+            ? std::min(double(options.exports.max_triangles), 2.0 * mesh_vertices * 16.0 * 16.0)
             : 0.0;
 
     struct Part {
@@ -104,9 +106,9 @@ inline ResourcePlan plan_resources(const Scene& scene, RunKind kind, int threads
 
 // Throws InputError when the plan needs more than limits.memory_bytes, naming the
 // largest part (and so the scene key to change).
-inline ResourcePlan check_resources(const Scene& scene, RunKind kind, int threads, const Limits& limits,
+inline ResourcePlan check_resources(const DesignJob& job, RunKind kind, int threads, const Limits& limits,
                                     const std::vector<LevelPlan>* levels = nullptr) {
-    const ResourcePlan plan = plan_resources(scene, kind, threads, levels);
+    const ResourcePlan plan = plan_resources(job, kind, threads, levels);
     if (plan.bytes > double(limits.memory_bytes))
         over_limit(std::string(kind == RunKind::design ? "the design" : "the render") + " would need about " +
                        format_bytes(plan.bytes) + " of memory (" + plan.largest +

@@ -12,6 +12,7 @@
 
 #include "../core/error.hpp"
 #include "../design/cell_means.hpp"
+#include "../design/options.hpp"
 #include "../scene/scene.hpp"
 #include "../surface/heightmap.hpp"
 
@@ -56,12 +57,12 @@ inline bool format_available(ExportFormat f) {
 #endif
 }
 
-// The formats a scene asks for. "auto": STEP and the mesh where Open CASCADE is built,
+// The formats a job asks for (optimise.export_formats). "auto": STEP and the mesh where Open CASCADE is built,
 // STEP first (the part that keeps the designed surface leads the summary and gives
 // error_physical), else the mesh alone. Throws InputError naming the key for a format
 // this build cannot write.
-inline std::vector<ExportFormat> export_formats(const Scene& scene) {
-    std::vector<ExportFormat> f = scene.optimise.export_formats;
+inline std::vector<ExportFormat> export_formats(const ExportOptions& options) {
+    std::vector<ExportFormat> f = options.formats;
     if (f.empty()) {
         if (format_available(ExportFormat::step)) f.push_back(ExportFormat::step);
         f.push_back(ExportFormat::mesh);

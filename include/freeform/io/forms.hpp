@@ -30,7 +30,8 @@ namespace forms_detail {
 // Traces a smooth form given by `at(u, v)` → (point, unit normal) over the cells of the
 // exported top of `grid` (export_blank: a lens's rim too); `grid` places the rays.
 template <class At>
-void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const ImageD* target, int threads, At&& at) {
+void judge(FormCheck& fc, const Scene& scene, std::uint64_t seed, const Heightmap& grid, const ImageD* target,
+           int threads, At&& at) {
 #if defined(FREEFORM_WITH_EMBREE)
     const Heightmap top = export_blank(scene, grid);
     fc.tessellation = judge_subdivisions(top);
@@ -40,9 +41,9 @@ void judge(FormCheck& fc, const Scene& scene, const Heightmap& grid, const Image
     fc.triangles = std::int64_t(g.mesh.triangles.size());
     if (target)
         fc.cells = exported_cell_means(exec::omp_t{threads}, scene, grid, g, target,
-                                       physical_cell_mean_options(scene.optimise.seed));
+                                       physical_cell_mean_options(seed));
 #else
-    (void)fc, (void)scene, (void)grid, (void)target, (void)threads, (void)at;
+    (void)fc, (void)scene, (void)seed, (void)grid, (void)target, (void)threads, (void)at;
 #endif
 }
 
@@ -67,10 +68,11 @@ inline void write_form(ExportFormat format, const std::filesystem::path& file, c
 }
 
 // Reads `file` back and judges what it holds.
-inline void check_form(FormCheck& fc, const Scene& scene, const Heightmap& grid, const ImageD* target, int threads) {
+inline void check_form(FormCheck& fc, const Scene& scene, std::uint64_t seed, const Heightmap& grid,
+                       const ImageD* target, int threads) {
     if (fc.format == ExportFormat::sag) {
         const GridSag g = read_grid_sag(fc.file);
-        return judge(fc, scene, grid, target, threads, [&](double u, double v) {
+        return judge(fc, scene, seed, grid, target, threads, [&](double u, double v) {
             const SplineSample q = g.eval(u, v);
             return PhongVertex{{u, v, q.z}, q.normal()};
         });
@@ -81,7 +83,7 @@ inline void check_form(FormCheck& fc, const Scene& scene, const Heightmap& grid,
                : part.solid_count() != 1    ? "no: " + std::to_string(part.solid_count()) + " solids"
                : !part.closed()             ? "no: the shell is open"
                                             : "yes";
-    judge(fc, scene, grid, target, threads, [&](double u, double v) { return part.sample_m(u, v); });
+    judge(fc, scene, seed, grid, target, threads, [&](double u, double v) { return part.sample_m(u, v); });
 #endif
 }
 
@@ -93,7 +95,7 @@ inline void check_form(FormCheck& fc, const Scene& scene, const Heightmap& grid,
 // or read back, InputError for a format this build lacks or the mesh (written elsewhere).
 inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem::path& file, const Scene& scene,
                                       const Heightmap& grid, const BSplineSurface& spline, const ImageD* target,
-                                      int threads) {
+                                      std::uint64_t seed, int threads) {
     if (format == ExportFormat::mesh)
         throw InputError("write_and_check_form: the mesh is written by io::write_obj / write_stl");
     FormCheck fc;
@@ -107,7 +109,7 @@ inline FormCheck write_and_check_form(ExportFormat format, const std::filesystem
     fc.write_seconds = since(t0);
     fc.bytes = std::filesystem::file_size(file);
     const auto t1 = std::chrono::steady_clock::now();
-    forms_detail::check_form(fc, scene, grid, target, threads);
+    forms_detail::check_form(fc, scene, seed, grid, target, threads);
     fc.check_seconds = since(t1);
     return fc;
 }

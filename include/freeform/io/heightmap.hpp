@@ -39,18 +39,21 @@ inline void write_heightmap(const std::filesystem::path& file, const Heightmap& 
     write_pfm(file, heightmap_image(surface));
 }
 
-// The start surface a scene names as a PFM file (surface.initial) on the design's final
-// mesh; empty when it starts from no file (flat, a paraboloid, the transport start).
-inline std::optional<Heightmap> load_start_surface(const Scene& scene, const Limits& limits = {}) {
+// The start surface a scene names as a PFM file (surface.initial) on the final mesh of the
+// design's `levels` (plan_levels); empty when it starts from no file (flat, a paraboloid,
+// the transport start).
+inline std::optional<Heightmap> load_start_surface(const Scene& scene, const std::vector<LevelPlan>& levels,
+                                                   const Limits& limits = {}) {
     if (scene.surface.initial_pfm.empty()) return std::nullopt;
-    const auto [nx, ny] = final_mesh(scene);
+    const auto [nx, ny] = final_mesh(scene, levels);
     return make_initial_heightmap(scene, nx, ny, limits);
 }
 
 // The surface a render or a design begins with, before any transport start: the scene's
-// PFM file, or its flat or paraboloid start, on the design's final mesh.
-inline Heightmap scene_surface(const Scene& scene, const Limits& limits = {}) {
-    const auto [nx, ny] = final_mesh(scene);
+// PFM file, or its flat or paraboloid start, on the final mesh a design of the job plans.
+inline Heightmap scene_surface(const DesignJob& job, const Limits& limits = {}) {
+    const Scene& scene = job.scene;
+    const auto [nx, ny] = final_mesh(scene, job.options);
     return make_initial_heightmap(scene, nx, ny, limits);
 }
 

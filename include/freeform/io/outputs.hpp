@@ -72,7 +72,7 @@ struct DesignImages {
 // (command, scene) and goes out as the metrics.json written: the smooth forms
 // (surface.step, surface.dat) are written first, read back from the staging folder and
 // judged, and their figures go into export.forms (the leading form's into
-// error_physical). `formats`: io::export_formats(d.scene). `phase` hears each long step.
+// error_physical). `formats`: io::export_formats(d.options.exports). `phase` hears each long step.
 inline DesignImages write_design_outputs(const std::filesystem::path& out, nlohmann::json& m, const CompletedDesign& d,
                                          const ImageD& target, const std::vector<ExportFormat>& formats,
                                          const std::function<void(const std::string&)>& phase = {}) {
@@ -90,7 +90,7 @@ inline DesignImages write_design_outputs(const std::filesystem::path& out, nlohm
         if (phase) phase(std::string("writing ") + name + ", reading it back and tracing it");
         staged.write(name, [&](const std::filesystem::path& f) {
             FormCheck fc = write_and_check_form(format, f, d.scene, d.result.surface, d.exported.spline, &target,
-                                                d.scene.optimise.threads);
+                                                d.options.seed, d.options.threads);
             m["export"]["forms"][std::string(to_string(format))] = form_json(fc);
             if (format == formats.front() && fc.cells) {
                 // The form the scene exports first is the part judged: error_physical is its figure.
@@ -142,7 +142,7 @@ inline nlohmann::json render_metrics_json(const RenderResult& r, bool mesh,
     m["tracer"] = to_string(r.decision.tracer);
     m["tracer_reason"] = r.decision.reason;
     m["threads"] = r.threads;
-    m["seed"] = scene.optimise.seed;
+    m["seed"] = r.options.seed;
     m["rays"] = r.rays;
     m["rays_hit_receiver"] = r.totals.rays_hit_receiver;
     m["energy"] = r.totals.energy();
@@ -163,7 +163,7 @@ inline nlohmann::json render_metrics_json(const RenderResult& r, bool mesh,
         m["cell_means"] = cell_means_json(*r.cells, mesh ? "the mesh, as rendered" : "the surface, as rendered");
     }
     if (r.start) m["start"] = start_report_json(*r.start);
-    m["effective_scene"] = scene_to_json(scene);
+    m["effective_scene"] = job_to_json(DesignJob{scene, r.options});
     return m;
 }
 

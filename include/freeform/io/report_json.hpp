@@ -211,7 +211,7 @@ inline nlohmann::json form_json(const FormCheck& f) {
 // knows: the command, the scene's path, replicas.
 inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
     const DesignResult& r = d.result;
-    const DesignOptions& options = d.scene.optimise;
+    const DesignOptions& options = d.options;
     nlohmann::json m;
     m["error"] = d.fitted.error;
     if (d.error_held_out) m["error_held_out"] = *d.error_held_out;
@@ -236,13 +236,13 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
         bank.push_back({{"sigma_x", s.sigma_x}, {"sigma_y", s.sigma_y}, {"rho", s.rho}, {"support", s.support},
                         {"weight", k < r.bandit_weights.size() ? r.bandit_weights[k] : 0.0}});
     }
-    m["bandit"] = to_string(options.bandit);
+    m["bandit"] = to_string(options.proposals.bandit);
     m["bandit_weights"] = r.bandit_weights;
     if (!r.preprocess_rates.empty()) m["bandit_preprocess_reward_per_move"] = r.preprocess_rates;
     m["kernels"] = bank;
     m["levels"] = stage_reports_json(r.stages);
     m["start"] = start_report_json(r.start);
-    m["effective_scene"] = scene_to_json(d.scene);
+    m["effective_scene"] = job_to_json(DesignJob{d.scene, d.options});
     add_export_json(m, d.scene, d.exported);
     return m;
 }

@@ -150,14 +150,15 @@ inline void check_scene_files(const Scene& scene) {
         detail::require_file(detail::resolve(scene, scene.meshes[k].file), "meshes[" + std::to_string(k) + "].file");
 }
 
-// Parses and validates the text of a scene file; `name` names it in messages and
+// Parses and validates the text of a scene file (the scene and its design options,
+// DesignJob); `name` names it in messages and
 // relative file names resolve against `base_dir`. JSON comments (// and /* */) are
 // allowed. Every error names the file: syntax errors with line and column, bad values
 // with the key ("scene.json: surface.size[1]: must be > 0, got -0.1"), nesting deeper
 // than limits.json_depth (found before parsing). Throws InputError. Does no I/O: the
-// files the scene names are not checked (load_scene does that).
-inline Scene parse_scene(std::string_view text, const std::string& name, const std::filesystem::path& base_dir,
-                         const Limits& limits = {}) {
+// files the scene names are not checked (load_job does that).
+inline DesignJob parse_job(std::string_view text, const std::string& name, const std::filesystem::path& base_dir,
+                           const Limits& limits = {}) {
     if (const std::size_t at = detail::first_too_deep(text, limits.json_depth); at != std::string_view::npos)
         over_limit(name + ": arrays and objects nested deeper than " + std::to_string(limits.json_depth) +
                        " levels at " + detail::text_position(text, at + 1),
@@ -178,26 +179,38 @@ inline Scene parse_scene(std::string_view text, const std::string& name, const s
         throw InputError(name + ": " + e.what());
     }
     try {
-        return scene_from_json(j, base_dir);
+        return job_from_json(j, base_dir);
     } catch (const InputError& e) {
         throw InputError(name + ": " + e.what());
     }
 }
 
-// Reads, parses (parse_scene) and validates a scene file, refusing one larger than
+// Reads, parses (parse_job) and validates a scene file, refusing one larger than
 // limits.scene_file_bytes before reading it; relative file names in it resolve against
 // the file's directory (Scene::base_dir, absolute). Missing files, the scene's or those
 // it names, throw IoError, everything else InputError.
-inline Scene load_scene(const std::filesystem::path& file, const Limits& limits = {}) {
+inline DesignJob load_job(const std::filesystem::path& file, const Limits& limits = {}) {
     const std::string text = read_file_bytes(file, limits.scene_file_bytes, "scene_file_bytes");
     const std::string name = file.string();
-    Scene scene = parse_scene(text, name, std::filesystem::absolute(file).parent_path(), limits);
+    DesignJob job = parse_job(text, name, std::filesystem::absolute(file).parent_path(), limits);
     try {
-        check_scene_files(scene);
+        check_scene_files(job.scene);
     } catch (const IoError& e) {
         throw IoError(name + ": " + e.what());
     }
-    return scene;
+    return job;
+}
+
+// The scene of a scene file alone (load_job(file, limits).scene), for a caller that does
+// not design it; the whole file is still read and checked.
+inline Scene load_scene(const std::filesystem::path& file, const Limits& limits = {}) {
+    return load_job(file, limits).scene;
+}
+
+// The scene in the text of a scene file alone (parse_job(...).scene).
+inline Scene parse_scene(std::string_view text, const std::string& name, const std::filesystem::path& base_dir,
+                         const Limits& limits = {}) {
+    return parse_job(text, name, base_dir, limits).scene;
 }
 
 // The heights of `img` (metres; image row 0 is the +v edge) on `scene`'s surface, on the

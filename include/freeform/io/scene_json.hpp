@@ -32,6 +32,7 @@
 #include "../core/error.hpp"
 #include "../core/math.hpp"
 #include "../core/frame.hpp"
+#include "../design/options.hpp"
 #include "../scene/scene.hpp"
 
 namespace freeform {
@@ -644,32 +645,40 @@ inline json levels_json(const std::vector<LevelPlan>& levels) {
     return out;
 }
 
-// The optimiser keys, one row each. Most are a plain field of OptimiseSpec (a number, an
-// integer or a flag) read within [lo, hi] ([lo, hi) when hi_open) and written as it is;
-// the rest name a reader and a writer of their own. Adding a setting is adding a row (and
-// a field to OptimiseSpec).
-using OptimiseField = std::variant<std::monostate, double OptimiseSpec::*, int OptimiseSpec::*,
-                                   std::int64_t OptimiseSpec::*, std::uint64_t OptimiseSpec::*, bool OptimiseSpec::*>;
+// The optimiser keys, one row each, each a field of DesignOptions or of the option
+// struct of the module it belongs to (design/options.hpp). Most are a plain field (a
+// number, an integer or a flag) read within [lo, hi] ([lo, hi) when hi_open) and written
+// as it is, reached through field<...> (the path of members from DesignOptions down); the
+// rest name a reader and a writer of their own. Adding a setting is adding a row (and a
+// field to its module's options).
+template <auto... Members>
+auto& field(DesignOptions& o) {
+    return (o.*....*Members);
+}
+
+using OptimiseField =
+    std::variant<std::monostate, double& (*)(DesignOptions&), int& (*)(DesignOptions&),
+                 std::int64_t& (*)(DesignOptions&), std::uint64_t& (*)(DesignOptions&), bool& (*)(DesignOptions&)>;
 
 struct OptimiseKey {
     std::string_view name;
     OptimiseField field{};
     double lo = 0, hi = std::numeric_limits<double>::infinity();  // integers: hi = inf is no upper bound
     bool hi_open = false;
-    void (*read)(const json& v, const std::string& path, OptimiseSpec& o) = nullptr;
-    void (*write)(const OptimiseSpec& o, std::string_view name, json& j) = nullptr;
+    void (*read)(const json& v, const std::string& path, DesignOptions& o) = nullptr;
+    void (*write)(const DesignOptions& o, std::string_view name, json& j) = nullptr;
 };
 
 // Keys that are not a plain field.
-inline void read_time_budget(const json& v, const std::string& p, OptimiseSpec& o) { o.time_budget = positive(v, p); }
-inline void write_time_budget(const OptimiseSpec& o, std::string_view n, json& j) { j[std::string(n)] = o.time_budget; }
+inline void read_time_budget(const json& v, const std::string& p, DesignOptions& o) { o.time_budget = positive(v, p); }
+inline void write_time_budget(const DesignOptions& o, std::string_view n, json& j) { j[std::string(n)] = o.time_budget; }
 
-inline void read_levels_key(const json& v, const std::string& p, OptimiseSpec& o) { o.levels = read_levels(v, p); }
-inline void write_levels_key(const OptimiseSpec& o, std::string_view n, json& j) {
+inline void read_levels_key(const json& v, const std::string& p, DesignOptions& o) { o.levels = read_levels(v, p); }
+inline void write_levels_key(const DesignOptions& o, std::string_view n, json& j) {
     if (!o.levels.empty()) j[std::string(n)] = levels_json(o.levels);
 }
 
-inline void read_start_level(const json& v, const std::string& p, OptimiseSpec& o) {
+inline void read_start_level(const json& v, const std::string& p, DesignOptions& o) {
     if (v.is_string() && v.get<std::string>() == "auto")
         o.start_level = -1;
     else if (v.is_number_integer())
@@ -678,148 +687,156 @@ inline void read_start_level(const json& v, const std::string& p, OptimiseSpec& 
         throw error(p, "expected \"auto\" or the index of the first planned level to run (0 = the coarsest), got " +
                            describe(v));
 }
-inline void write_start_level(const OptimiseSpec& o, std::string_view n, json& j) {
+inline void write_start_level(const DesignOptions& o, std::string_view n, json& j) {
     j[std::string(n)] = o.start_level < 0 ? json("auto") : json(o.start_level);
 }
 
-inline void read_export_subdivisions(const json& v, const std::string& p, OptimiseSpec& o) {
+inline void read_export_subdivisions(const json& v, const std::string& p, DesignOptions& o) {
     if (v.is_string() && v.get<std::string>() == "auto")
-        o.export_subdivisions = 0;
+        o.exports.subdivisions = 0;
     else if (v.is_number_integer())
-        o.export_subdivisions = int(integer(v, p, 1, 64));
+        o.exports.subdivisions = int(integer(v, p, 1, 64));
     else
         throw error(p, "expected \"auto\" or a subdivision level from 1 to 64, got " + describe(v));
 }
-inline void write_export_subdivisions(const OptimiseSpec& o, std::string_view n, json& j) {
-    j[std::string(n)] = o.export_subdivisions <= 0 ? json("auto") : json(o.export_subdivisions);
+inline void write_export_subdivisions(const DesignOptions& o, std::string_view n, json& j) {
+    j[std::string(n)] = o.exports.subdivisions <= 0 ? json("auto") : json(o.exports.subdivisions);
 }
 
 // "auto" or a list of distinct format names.
-inline void read_export_formats(const json& v, const std::string& p, OptimiseSpec& o) {
-    o.export_formats.clear();
+inline void read_export_formats(const json& v, const std::string& p, DesignOptions& o) {
+    std::vector<ExportFormat>& formats = o.exports.formats;
+    formats.clear();
     if (v.is_string() && v.get<std::string>() == "auto") return;
     if (!v.is_array() || v.empty())
         throw error(p, "expected \"auto\" or a non-empty list of " + enum_list(export_format_names, "\"") + ", got " +
                            describe(v));
     for (std::size_t k = 0; k < v.size(); ++k) {
         const ExportFormat f = enumeration(v[k], p + "[" + std::to_string(k) + "]", export_format_names);
-        if (std::find(o.export_formats.begin(), o.export_formats.end(), f) != o.export_formats.end())
+        if (std::find(formats.begin(), formats.end(), f) != formats.end())
             throw error(p, "\"" + std::string(to_string(f)) + "\" is listed twice");
-        o.export_formats.push_back(f);
+        formats.push_back(f);
     }
 }
-inline void write_export_formats(const OptimiseSpec& o, std::string_view n, json& j) {
-    if (o.export_formats.empty()) {
+inline void write_export_formats(const DesignOptions& o, std::string_view n, json& j) {
+    if (o.exports.formats.empty()) {
         j[std::string(n)] = "auto";
         return;
     }
     json list = json::array();
-    for (const ExportFormat f : o.export_formats) list.push_back(std::string(to_string(f)));
+    for (const ExportFormat f : o.exports.formats) list.push_back(std::string(to_string(f)));
     j[std::string(n)] = list;
 }
 
-// An enum field M whose names are Names (its table, scene/scene.hpp).
-template <auto M, const auto& Names>
-void read_enum_key(const json& v, const std::string& p, OptimiseSpec& o) {
-    o.*M = enumeration(v, p, Names);
+// An enum field reached by Members whose names are Names (the table beside the enum).
+template <const auto& Names, auto... Members>
+void read_enum_key(const json& v, const std::string& p, DesignOptions& o) {
+    field<Members...>(o) = enumeration(v, p, Names);
 }
-template <auto M, const auto& Names>
-void write_enum_key(const OptimiseSpec& o, std::string_view n, json& j) {
-    j[std::string(n)] = enum_name(o.*M, Names);
+template <const auto& Names, auto... Members>
+void write_enum_key(const DesignOptions& o, std::string_view n, json& j) {
+    DesignOptions copy = o;
+    j[std::string(n)] = enum_name(field<Members...>(copy), Names);
 }
 
 inline std::span<const OptimiseKey> optimise_keys() {
-    using S = OptimiseSpec;
+    using S = DesignOptions;
+    using O = ObjectiveWeights;
+    using W = PenaltyWeights;
+    using P = ProposalOptions;
+    using C = ScheduleOptions;
     static constexpr double any = std::numeric_limits<double>::infinity();
     static constexpr OptimiseKey table[] = {
         {.name = "time_budget", .read = read_time_budget, .write = write_time_budget},
-        {"seed", &S::seed},
-        {"max_iterations", &S::max_iterations, 0, any},
-        {"target_error", &S::target_error, 0, 1, true},
-        {"threads", &S::threads, 0, 65536},
-        {"speculative", &S::speculative, 0, 256},
+        {"seed", &field<&S::seed>},
+        {"max_iterations", &field<&S::max_iterations>, 0, any},
+        {"target_error", &field<&S::target_error>, 0, 1, true},
+        {"threads", &field<&S::threads>, 0, 65536},
+        {"speculative", &field<&S::speculative>, 0, 256},
         {.name = "levels", .read = read_levels_key, .write = write_levels_key},
-        {"multilevel", &S::multilevel},
+        {"multilevel", &field<&S::multilevel>},
         {.name = "start_level", .read = read_start_level, .write = write_start_level},
-        {"refine_initial_acceptance", &S::refine_initial_acceptance, 1e-6, 0.999},
-        {"refine_max_shift_cells", &S::refine_max_shift_cells, 0.01, 100},
-        {"coarse_rays_per_cell", &S::coarse_rays_per_cell, 0, 1 << 20},
-        {"min_rays_per_mesh_cell", &S::min_rays_per_mesh_cell, 0, 1 << 16},
-        {"initial_temperature_scale", &S::initial_temperature_scale, 1e-6, 1e6},
-        {"held_out_checks", &S::held_out_checks},
-        {"sobel_weight", &S::sobel_weight, 0, 10},
-        {"energy_threshold", &S::energy_threshold, 0, 1},
-        {"lost_light_weight", &S::lost_light_weight, 0, 100},
-        {"height_bound_weight", &S::height_bound_weight, 0, 1e6},
-        {"valley_weight", &S::valley_weight, 0, 1e6},
-        {"valley_min_angle", &S::valley_min_angle, 0, 180},
-        {"smoothness_weight", &S::smoothness_weight, 0, 1e6},
+        {"refine_initial_acceptance", &field<&S::schedule, &C::refine_initial_acceptance>, 1e-6, 0.999},
+        {"refine_max_shift_cells", &field<&S::proposals, &P::refine_max_shift_cells>, 0.01, 100},
+        {"coarse_rays_per_cell", &field<&S::coarse_rays_per_cell>, 0, 1 << 20},
+        {"min_rays_per_mesh_cell", &field<&S::min_rays_per_mesh_cell>, 0, 1 << 16},
+        {"initial_temperature_scale", &field<&S::schedule, &C::initial_temperature_scale>, 1e-6, 1e6},
+        {"held_out_checks", &field<&S::held_out_checks>},
+        {"sobel_weight", &field<&S::objective, &O::sobel>, 0, 10},
+        {"energy_threshold", &field<&S::objective, &O::energy_threshold>, 0, 1},
+        {"lost_light_weight", &field<&S::objective, &O::lost_light>, 0, 100},
+        {"height_bound_weight", &field<&S::penalties, &W::height_bound>, 0, 1e6},
+        {"valley_weight", &field<&S::penalties, &W::valley>, 0, 1e6},
+        {"valley_min_angle", &field<&S::penalties, &W::valley_min_angle>, 0, 180},
+        {"smoothness_weight", &field<&S::penalties, &W::smoothness>, 0, 1e6},
         {.name = "evaluation",
-         .read = read_enum_key<&S::evaluation, evaluation_names>,
-         .write = write_enum_key<&S::evaluation, evaluation_names>},
+         .read = read_enum_key<evaluation_names, &S::evaluation>,
+         .write = write_enum_key<evaluation_names, &S::evaluation>},
         {.name = "kernel_shapes",
-         .read = read_enum_key<&S::kernel_shapes, kernel_shape_names>,
-         .write = write_enum_key<&S::kernel_shapes, kernel_shape_names>},
+         .read = read_enum_key<kernel_shape_names, &S::proposals, &P::kernel_shapes>,
+         .write = write_enum_key<kernel_shape_names, &S::proposals, &P::kernel_shapes>},
         {.name = "bandit",
-         .read = read_enum_key<&S::bandit, bandit_kind_names>,
-         .write = write_enum_key<&S::bandit, bandit_kind_names>},
-        {"bandit_sync", &S::bandit_sync, 1, 1 << 20},
-        {"preprocess_iterations", &S::preprocess_iterations, 0, any},
-        {"preprocess_keep", &S::preprocess_keep, 1, 64},
-        {"error_guided", &S::error_guided},
-        {"single_vertex", &S::single_vertex},
-        {"max_shift_cells", &S::max_shift_cells, 1e-6, 1e4},
-        {"min_shift_cells", &S::min_shift_cells, 0, 1e4},
-        {"initial_acceptance", &S::initial_acceptance, 1e-6, 0.999},
-        {"cooling", &S::cooling, 1e-6, 1},
-        {"temperature_steps", &S::temperature_steps, 1, 1 << 24},
-        {"reheat_factor", &S::reheat_factor, 1e-6, 1},
-        {"patience_fraction", &S::patience_fraction, 0, 1},
-        {"smooth_iterations", &S::smooth_iterations, 0, 10000},
+         .read = read_enum_key<bandit_kind_names, &S::proposals, &P::bandit>,
+         .write = write_enum_key<bandit_kind_names, &S::proposals, &P::bandit>},
+        {"bandit_sync", &field<&S::proposals, &P::bandit_sync>, 1, 1 << 20},
+        {"preprocess_iterations", &field<&S::proposals, &P::preprocess_iterations>, 0, any},
+        {"preprocess_keep", &field<&S::proposals, &P::preprocess_keep>, 1, 64},
+        {"error_guided", &field<&S::proposals, &P::error_guided>},
+        {"single_vertex", &field<&S::proposals, &P::single_vertex>},
+        {"max_shift_cells", &field<&S::proposals, &P::max_shift_cells>, 1e-6, 1e4},
+        {"min_shift_cells", &field<&S::proposals, &P::min_shift_cells>, 0, 1e4},
+        {"initial_acceptance", &field<&S::schedule, &C::initial_acceptance>, 1e-6, 0.999},
+        {"cooling", &field<&S::schedule, &C::cooling>, 1e-6, 1},
+        {"temperature_steps", &field<&S::schedule, &C::temperature_steps>, 1, 1 << 24},
+        {"reheat_factor", &field<&S::schedule, &C::reheat_factor>, 1e-6, 1},
+        {"patience_fraction", &field<&S::schedule, &C::patience_fraction>, 0, 1},
+        {"smooth_iterations", &field<&S::smooth_iterations>, 0, 10000},
         {.name = "export_subdivisions", .read = read_export_subdivisions, .write = write_export_subdivisions},
-        {"export_tolerance", &S::export_tolerance, 0.01, 10},
-        {"export_max_triangles", &S::export_max_triangles, 1000, 1'000'000'000},
+        {"export_tolerance", &field<&S::exports, &ExportOptions::tolerance>, 0.01, 10},
+        {"export_max_triangles", &field<&S::exports, &ExportOptions::max_triangles>, 1000, 1'000'000'000},
         {.name = "export_formats", .read = read_export_formats, .write = write_export_formats},
     };
     return table;
 }
 
 // Reads key k from v into o: its own reader, or its field within [lo, hi].
-inline void read_optimise_key(const OptimiseKey& k, const json& v, const std::string& p, OptimiseSpec& o) {
+inline void read_optimise_key(const OptimiseKey& k, const json& v, const std::string& p, DesignOptions& o) {
     if (k.read) return k.read(v, p, o);
     const auto bound = [](double x) {  // an integer bound; inf: none
         return x >= 9.2e18 ? std::numeric_limits<std::int64_t>::max() : std::int64_t(x);
     };
     std::visit(
-        [&](auto m) {
-            using M = decltype(m);
-            if constexpr (std::is_same_v<M, double OptimiseSpec::*>)
-                o.*m = number_in(v, p, k.lo, k.hi, k.hi_open);
-            else if constexpr (std::is_same_v<M, bool OptimiseSpec::*>)
-                o.*m = boolean(v, p);
-            else if constexpr (std::is_same_v<M, std::uint64_t OptimiseSpec::*>)
-                o.*m = unsigned_integer(v, p);
+        [&](auto get) {
+            using M = decltype(get);
+            if constexpr (std::is_same_v<M, double& (*)(DesignOptions&)>)
+                get(o) = number_in(v, p, k.lo, k.hi, k.hi_open);
+            else if constexpr (std::is_same_v<M, bool& (*)(DesignOptions&)>)
+                get(o) = boolean(v, p);
+            else if constexpr (std::is_same_v<M, std::uint64_t& (*)(DesignOptions&)>)
+                get(o) = unsigned_integer(v, p);
             else if constexpr (!std::is_same_v<M, std::monostate>)  // int or int64
-                o.*m = std::remove_reference_t<decltype(o.*m)>(integer(v, p, bound(k.lo), bound(k.hi)));
+                get(o) = std::remove_reference_t<decltype(get(o))>(integer(v, p, bound(k.lo), bound(k.hi)));
         },
         k.field);
 }
 
-inline void write_optimise_key(const OptimiseKey& k, const OptimiseSpec& o, json& j) {
+// Writes key k of `o` into j (the fields are reached through the readers' accessors, so
+// `o` is the writer's own copy).
+inline void write_optimise_key(const OptimiseKey& k, DesignOptions& o, json& j) {
     if (k.write) return k.write(o, k.name, j);
     std::visit(
-        [&](auto m) {
-            if constexpr (!std::is_same_v<decltype(m), std::monostate>) j[std::string(k.name)] = o.*m;
+        [&](auto get) {
+            if constexpr (!std::is_same_v<decltype(get), std::monostate>) j[std::string(k.name)] = get(o);
         },
         k.field);
 }
 
-inline OptimiseSpec read_optimise(const json& j, const std::string& path) {
+inline DesignOptions read_optimise(const json& j, const std::string& path) {
     const Object o(j, path);
     std::vector<std::string_view> keys;
     for (const auto& k : optimise_keys()) keys.push_back(k.name);
     o.only(keys);
-    OptimiseSpec spec;
+    DesignOptions spec;
     for (const auto& k : optimise_keys())
         if (const json* v = o.find(k.name)) read_optimise_key(k, *v, o.at(k.name), spec);
     return spec;
@@ -827,16 +844,18 @@ inline OptimiseSpec read_optimise(const json& j, const std::string& path) {
 
 }  // namespace scene_json
 
-// Parses and validates a scene. Relative file names are resolved against `base_dir`
-// (made absolute when given; left relative to the working directory when empty) and
-// stored resolved; Scene::base_dir is set to it. Throws InputError naming the key.
-inline Scene scene_from_json(const nlohmann::json& j, const std::filesystem::path& base_dir = {}) {
+// Parses and validates a scene file: the scene and its design options (the "optimise"
+// block). Relative file names are resolved against `base_dir` (made absolute when given;
+// left relative to the working directory when empty) and stored resolved;
+// Scene::base_dir is set to it. Throws InputError naming the key.
+inline DesignJob job_from_json(const nlohmann::json& j, const std::filesystem::path& base_dir = {}) {
     using namespace scene_json;
     const Object top(j, "");
     static constexpr std::array<std::string_view, 10> keys{"light", "surface",  "receiver", "target", "meshes",
                                                            "trace", "optimise", "optimize", "name",   "description"};
     top.only(keys);
-    Scene s;
+    DesignJob job;
+    Scene& s = job.scene;
     if (!base_dir.empty()) {
         std::error_code ec;  // absolute() only fails without a working directory; keep the name then
         const std::filesystem::path abs = std::filesystem::absolute(base_dir, ec);
@@ -851,15 +870,21 @@ inline Scene scene_from_json(const nlohmann::json& j, const std::filesystem::pat
     if (const json* v = top.find("trace")) s.trace = read_trace(*v);
     if (top.find("optimise") && top.find("optimize"))
         throw error("optimize", "give either \"optimise\" or \"optimize\", not both");
-    if (const json* v = top.find("optimise")) s.optimise = read_optimise(*v, "optimise");
-    if (const json* v = top.find("optimize")) s.optimise = read_optimise(*v, "optimize");
+    if (const json* v = top.find("optimise")) job.options = read_optimise(*v, "optimise");
+    if (const json* v = top.find("optimize")) job.options = read_optimise(*v, "optimize");
     if (const json* v = top.find("name")) s.name = string_value(*v, "name");
     if (const json* v = top.find("description")) s.description = string_value(*v, "description");
 
     if (!s.meshes.empty() && s.trace.tracer == TracerChoice::heightfield)
         throw error("trace.tracer", "\"heightfield\" cannot trace the " + std::to_string(s.meshes.size()) +
                                         " extra mesh(es) in \"meshes\"; use \"embree\" or \"auto\"");
-    return s;
+    return job;
+}
+
+// The scene of a scene file alone (job_from_json(j, base_dir).scene): the whole file is
+// still read and checked, its "optimise" block included.
+inline Scene scene_from_json(const nlohmann::json& j, const std::filesystem::path& base_dir = {}) {
+    return job_from_json(j, base_dir).scene;
 }
 
 namespace scene_json {
@@ -922,7 +947,8 @@ inline json surface_to_json(const Scene& s) {
 }  // namespace scene_json
 
 // The effective scene with every default written out (file names as given to the
-// Scene, i.e. resolved when it was loaded). Reading it back gives the same JSON.
+// Scene, i.e. resolved when it was loaded), without an "optimise" block (job_to_json
+// writes one). Reading it back gives the same JSON.
 inline nlohmann::json scene_to_json(const Scene& s) {
     using namespace scene_json;
     json out = json::object();
@@ -953,8 +979,16 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     out["meshes"] = meshes;
     out["trace"] = json{{"tracer", enum_name(s.trace.tracer, tracer_names)}, {"max_depth", s.trace.max_depth}};
     if (s.trace.fresnel) out["trace"]["fresnel"] = true;
-    json opt = json::object();
-    for (const auto& k : optimise_keys()) write_optimise_key(k, s.optimise, opt);
+    return out;
+}
+
+// A job as a scene file: the scene (scene_to_json) and its "optimise" block with every
+// default written out. Reading it back (job_from_json) gives the same JSON.
+inline nlohmann::json job_to_json(const DesignJob& job) {
+    nlohmann::json out = scene_to_json(job.scene);
+    nlohmann::json opt = nlohmann::json::object();
+    DesignOptions options = job.options;  // write_optimise_key's own copy
+    for (const auto& k : scene_json::optimise_keys()) scene_json::write_optimise_key(k, options, opt);
     out["optimise"] = opt;
     return out;
 }

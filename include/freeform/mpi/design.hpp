@@ -1,13 +1,13 @@
 #pragma once
-// A whole design over MPI ranks: design/pipeline.hpp's design(scene, target, setup), with
+// A whole design over MPI ranks: design/pipeline.hpp's design(job, target, setup), with
 // the ranks of a communicator as replicas of it or as workers on strips of it
 // (replica_exchange.hpp: ReplicaMode, the coordinator, the start made once and shared).
 // CMake target freeform::mpi, built only where MPI is found.
 //
-//     mpi::ReplicaDesign r = mpi::design(scene, target, setup, MPI_COMM_WORLD);
+//     mpi::ReplicaDesign r = mpi::design(job, target, setup, MPI_COMM_WORLD);
 //     if (r.design) io::write_design_outputs(...);   // rank 0 alone holds the design
 //
-// Every rank calls it with the same scene, target and setup. Every rank plans the scene
+// Every rank calls it with the same job, target and setup. Every rank plans the scene
 // (so every rank finds the same input error), anneals its replica, and the best replica's
 // result (replica_exchange.hpp, gather_best) is finished (smoothed, cut, traced, exported
 // and judged: finish_design) on rank 0 alone. With one rank it is design() bit for bit.
@@ -129,11 +129,11 @@ inline ReplicaDesign design(PlannedDesign plan, const ImageD& target, const Desi
         if (rank == 0) out.design = freeform::design(std::move(plan), target, setup);
         return out;
     }
-    Replicas replicas(comm, plan.scene.optimise.seed, replica_setup.options);
+    Replicas replicas(comm, plan.options.seed, replica_setup.options);
     ReplicaReport report;
     report.ranks = replicas.size();
     report.options = replicas.options();
-    report.layout = rank_layout(comm, thread_count(exec::omp_t{plan.scene.optimise.threads}));
+    report.layout = rank_layout(comm, thread_count(exec::omp_t{plan.options.threads}));
     if (rank == 0 && replica_setup.layout) replica_setup.layout(report.layout);
     if (setup.callbacks.phase) setup.callbacks.phase(finding_the_start(plan.scene));
     DesignResult result = pipeline_detail::anneal(plan, target, setup, replicas);
@@ -153,11 +153,11 @@ inline ReplicaDesign design(PlannedDesign plan, const ImageD& target, const Desi
     return out;
 }
 
-// Designs `scene` on the ranks of `comm`: plans it (plan_design) and designs the plan.
+// Designs the job on the ranks of `comm`: plans it (plan_design) and designs the plan.
 // Throws InputError, on every rank, for a scene or options that cannot be designed.
-inline ReplicaDesign design(const Scene& scene, const ImageD& target, const DesignSetup& setup, MPI_Comm comm,
+inline ReplicaDesign design(const DesignJob& job, const ImageD& target, const DesignSetup& setup, MPI_Comm comm,
                             const ReplicaSetup& replica_setup = {}) {
-    return design(plan_design(scene, setup.initial), target, setup, comm, replica_setup);
+    return design(plan_design(job, setup.initial), target, setup, comm, replica_setup);
 }
 
 // metrics.json's "replicas" block: how the ranks shared the design (rank 0's report).

@@ -120,6 +120,16 @@ struct SmoothnessTerm {
     }
 };
 
+// The weights of the built-in height terms (the scene file's "optimise" keys
+// height_bound_weight, valley_weight, valley_min_angle, smoothness_weight); 0 leaves a
+// term out. default_penalties (below) makes the terms from them.
+struct PenaltyWeights {
+    double height_bound = 0;
+    double valley = 0;
+    double valley_min_angle = 170;  // degrees (ValleyTerm::min_angle_deg)
+    double smoothness = 0;
+};
+
 // The weighted local terms of an objective.
 class Penalties {
 public:
@@ -184,5 +194,22 @@ private:
     std::vector<Entry> terms_;
     int radius_ = 0;
 };
+
+// The weight of the tool-radius term when the surface has a tool_radius: a vertex whose
+// concave curvature is twice what the tool can cut costs as much as an error of 1 in the
+// mean over the grid divided by the vertex count, i.e. a few such vertices matter.
+inline constexpr double tool_radius_weight = 1.0;
+
+// The built-in terms `w` asks for, and the milling tool's when `tool_radius` > 0
+// (surface.tool_radius); add terms of your own to it and pass it to design() (any type
+// modelling LocalHeightTerm; docs/library.md "A custom term").
+inline Penalties default_penalties(const PenaltyWeights& w, double tool_radius = 0) {
+    Penalties p;
+    p.add(HeightBoundTerm{}, w.height_bound);
+    p.add(ValleyTerm{w.valley_min_angle}, w.valley);
+    p.add(SmoothnessTerm{}, w.smoothness);
+    if (tool_radius > 0) p.add(ToolRadiusTerm{tool_radius}, tool_radius_weight);
+    return p;
+}
 
 }  // namespace freeform

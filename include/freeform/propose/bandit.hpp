@@ -30,7 +30,7 @@
 
 #include "../core/error.hpp"
 #include "../core/rng.hpp"
-#include "../scene/scene.hpp"
+#include "options.hpp"
 
 namespace freeform {
 

@@ -1,6 +1,8 @@
 #pragma once
-// A complete design problem as read from a scene file (see docs/scene.md): what emits
-// light, the surface to design, where the light must land and what it should look like.
+// The physics of a design problem as read from a scene file (see docs/scene.md): what
+// emits light, the surface to design, where the light must land and what it should look
+// like. How the design is searched for (the file's "optimise" block) is not the scene's:
+// design/options.hpp holds those options, and DesignJob keeps the two together.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -76,105 +78,6 @@ struct TraceSpec {
     bool fresnel = false;
 };
 
-// One level of the multi-level schedule (design/designer.hpp).
-struct LevelPlan {
-    int mesh_x = 0, mesh_y = 0;        // surface vertices
-    int resolution_x = 0, resolution_y = 0;  // receiver pixels
-    std::vector<int> kernel_supports;  // one annealing stage per support, large to small
-    double time_share = 1.0;           // fraction of the time budget
-    std::int64_t iterations = 0;       // iteration budget of the level (split over its stages)
-};
-
-// How a move is judged: incremental (only the rays the move can reach are retraced,
-// docs/architecture.md §4) or full (every ray, for comparisons; the same trajectory).
-enum class EvaluationMode { incremental, full };
-// The kernels moves are made of: the bank of shapes a bandit chooses from, or one round
-// kernel (the reference's single-kernel baseline).
-enum class KernelShapes { bank, isotropic };
-// The bandit that picks a kernel shape (propose/bandit.hpp), in order of sophistication.
-enum class BanditKind { uniform, history, ucb1, discounted_ucb };
-
-// Their names in scene files and reports: the one mapping between the strings and the
-// values (io/scene_json.hpp reads and writes with it).
-inline constexpr std::array<EnumName<EvaluationMode>, 2> evaluation_names{
-    {{"incremental", EvaluationMode::incremental}, {"full", EvaluationMode::full}}};
-inline constexpr std::array<EnumName<KernelShapes>, 2> kernel_shape_names{
-    {{"bank", KernelShapes::bank}, {"isotropic", KernelShapes::isotropic}}};
-inline constexpr std::array<EnumName<BanditKind>, 4> bandit_kind_names{{{"uniform", BanditKind::uniform},
-                                                                        {"history", BanditKind::history},
-                                                                        {"ucb1", BanditKind::ucb1},
-                                                                        {"discounted-ucb", BanditKind::discounted_ucb}}};
-// The forms a design's surface is exported in (docs/export.md): the milled facets
-// (surface.obj/.stl), the smooth B-spline part (surface.step, builds with Open CASCADE)
-// and the grid sag table of the height map's vertices (surface.dat).
-enum class ExportFormat { mesh, step, sag };
-inline constexpr std::array<EnumName<ExportFormat>, 3> export_format_names{
-    {{"mesh", ExportFormat::mesh}, {"step", ExportFormat::step}, {"sag", ExportFormat::sag}}};
-inline std::string_view to_string(ExportFormat f) { return enum_name(f, export_format_names); }
-inline std::string_view to_string(EvaluationMode e) { return enum_name(e, evaluation_names); }
-inline std::string_view to_string(KernelShapes k) { return enum_name(k, kernel_shape_names); }
-inline std::string_view to_string(BanditKind b) { return enum_name(b, bandit_kind_names); }
-
-// Optimiser settings (the scene's "optimise" block; docs/scene.md lists each key).
-// Zero / empty fields mean "derive a default from the case".
-struct OptimiseSpec {
-    double time_budget = 60;  // seconds for the whole design
-    std::uint64_t seed = 1;
-    std::int64_t max_iterations = 0;  // over all levels; 0: the plan's budgets
-    double target_error = 0;          // stop when the objective reaches it; 0: off
-    int threads = 0;                  // 0: all cores
-    int speculative = 0;              // proposals evaluated at once; 0: one per thread
-    std::vector<LevelPlan> levels;    // empty: planned from the case
-    bool multilevel = true;           // false: only the final level
-    int start_level = -1;             // first planned level to run; -1: decided from the start's error
-    double coarse_rays_per_cell = 4;  // rays per receiver cell on levels before the last; 0: the light's
-    double min_rays_per_mesh_cell = 32;  // the last level: at least this many rays per cell of the
-                                         // final mesh (design/designer.hpp, fitting_rays_per_cell); 0: off
-    bool held_out_checks = true;      // judge stages with held-out rays (design/held_out.hpp)
-
-    // Objective.
-    double sobel_weight = 0.1;
-    double energy_threshold = 0.95;
-    double lost_light_weight = 1.0;
-    double height_bound_weight = 0;
-    double valley_weight = 0;
-    double valley_min_angle = 170;  // degrees
-    double smoothness_weight = 0;
-
-    // Proposals.
-    EvaluationMode evaluation = EvaluationMode::incremental;
-    KernelShapes kernel_shapes = KernelShapes::bank;
-    BanditKind bandit = BanditKind::history;
-    int bandit_sync = 64;
-    std::int64_t preprocess_iterations = 1000;  // history bandit: trial run with all shapes (0: none)
-    int preprocess_keep = 4;                    // ... after which the best shapes are kept
-    bool error_guided = false;
-    bool single_vertex = false;
-    double max_shift_cells = 4.0;
-    double min_shift_cells = 0.25;
-
-    // Annealing schedule.
-    double initial_acceptance = 0.03;  // of uphill moves at the start of each stage
-    double refine_initial_acceptance = 0.001;  // ... at most, after a transport start
-    double refine_max_shift_cells = 1.0;       // largest light shift of a move after a transport start
-    double initial_temperature_scale = 1;  // multiplies every stage's calibrated initial temperature
-    double cooling = 0.95;
-    int temperature_steps = 120;      // cooling steps per stage
-    double reheat_factor = 0.5;
-    double patience_fraction = 0.08;  // re-heat after this fraction of a stage without a new best
-
-    // Output.
-    int smooth_iterations = 0;        // post-processing passes of smooth_heights
-    int export_subdivisions = 0;      // tessellation level k of the exported mesh; 0 = "auto"
-    double export_tolerance = 0.05;   // "auto": light of a facet lands within this many receiver
-                                      // cells of where the simulated patch sends it
-    std::int64_t export_max_triangles = 2'000'000;  // "auto": k no larger than this allows
-    // What a design writes, the first leading its summary; empty: "auto" (STEP and the
-    // mesh in builds with Open CASCADE, the mesh alone otherwise; io/forms.hpp).
-    std::vector<ExportFormat> export_formats;
-    std::int64_t progress_every = 2000;
-};
-
 struct Scene;
 inline bool starts_from_transport(const Scene& scene);
 
@@ -185,7 +88,6 @@ struct Scene {
     std::optional<TargetSpec> target;
     std::vector<MeshSpec> meshes;
     TraceSpec trace{};
-    OptimiseSpec optimise{};
     std::filesystem::path base_dir;  // relative file names in the scene resolve here
     std::string name;                // free text for reports (scene key "name")
     std::string description;         // free text (scene key "description")
