@@ -284,6 +284,32 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
     CHECK(make_design_start(flat_scene, testing::surface_for(s, 31), target, 5, 1).report.used == StartKind::flat);
 }
 
+TEST_CASE("transport start: the grid follows the time budget, three cells per pixel where the budget allows") {
+    // The rule (design/start.hpp): about two fifths of the budget at 12 µs per cell, within
+    // [768, 2048]; no budget: the largest.
+    CHECK(start_grid_limit(10) == min_start_grid);
+    CHECK(start_grid_limit(60) == 1414);
+    CHECK(start_grid_limit(120) == 2000);
+    CHECK(start_grid_limit(1e6) == max_start_grid);
+    CHECK(start_grid_limit(0) == max_start_grid);
+    for (double t = 1; t < 2000; t *= 1.7) CHECK(start_grid_limit(t) <= start_grid_limit(1.7 * t));
+    // A 512² receiver asks for 1536 cells a side (3 per pixel): the limit decides how many
+    // it gets, the sides rounded up to FFT-friendly counts.
+    Scene s = testing::basic_scene(512, 1);
+    const Heightmap flat = testing::surface_for(s, 65);
+    const FlatFootprint fp = flat_footprint(s, flat);
+    for (const int limit : {min_start_grid, start_grid_limit(60), max_start_grid}) {
+        CAPTURE(limit);
+        TransportOptions o;
+        o.max_grid = limit;
+        const OtGrid g = transport_grid(s, fp, o);
+        const double per_pixel = (s.receiver.size.x / s.receiver.width) / g.hx;
+        CHECK(per_pixel == doctest::Approx(std::min(3.0, limit / 512.0)).epsilon(1e-9));
+        CHECK(g.nx >= std::min(1536, limit));
+        CHECK(g.nx < std::min(1536, limit) * 1.1);
+    }
+}
+
 TEST_CASE("transport start: scenes it cannot model fall back to flat and say why") {
     Scene s = testing::basic_scene(40);
     s.target = TargetSpec{};

@@ -2,8 +2,10 @@
 // Where a design starts: the caller's surface (flat, a heightmap, a paraboloid) or the
 // transport surface (transport/start.hpp), judged by the exact tracer. The designer uses
 // the measured error to decide how much coarse work the schedule still needs.
+#include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -99,6 +101,27 @@ struct SharedStart {
 // 4 mm pixels), both give the same grid and it is solved once.
 inline constexpr std::array<double, 2> start_grid_cells_per_pixel{3.0, 1.0};
 
+// The largest side of the transport grid a design of `time_budget` seconds (0: none)
+// solves its start on. The start's error is set by the map at sub-pixel scale, so the grid
+// asks for three cells per receiver pixel (start_grid_cells_per_pixel); above 256² pixels
+// a fixed cap of 768 cells cut that to 1.5 at 512² and 0.75 at 1024², and the start paid:
+// a 512² photograph (Grace Hopper, the camera geometry, `design --start-only`) starts at a
+// cell-mean error (error_physical) of 0.0415 on 768², 0.0356 on 1024² and 0.0300 on
+// 1536², its bottom row, where the photograph is dark, getting 5 %, 18 % and 44 % of its
+// light. Finer grids cost time: the solves took 6.1, 9.7 and 31 s on 2 cores (about
+// 12 µs per cell for a whole solve). So the cap follows the budget: the grid whose solve
+// takes about two fifths of it at that rate, at least 768 (the former cap; short budgets
+// are as before) and at most 2048 (1536 s of budget and more, or no budget). A 60 s
+// design gets 1414, a 120 s one 2000. The rate is fixed, not measured, so the grid, and
+// with it the design, depends on the options alone.
+inline constexpr int min_start_grid = 768, max_start_grid = 2048;
+inline int start_grid_limit(double time_budget) {
+    if (!(time_budget > 0)) return max_start_grid;
+    constexpr double solve_seconds_per_cell = 12e-6, budget_share = 0.4;
+    const double side = std::sqrt(budget_share * time_budget / solve_seconds_per_cell);
+    return int(std::clamp(side, double(min_start_grid), double(max_start_grid)));
+}
+
 struct TransportStart {
     TransportMap map;  // report: the grid used, and the other grid's start error
     Heightmap surface;
@@ -113,14 +136,16 @@ struct TransportStart {
 // plain start of the cheaper grid) on each grid, and the exact tracer judges those starts
 // with the plain ones: the strips remove the cross the walls throw, but their mirrored
 // light lands where the target may be black (a letter), and there the plain start can be
-// the better one. An InputError on the first grid (no light reaches the receiver) propagates.
+// the better one. `max_grid`: the grids' largest side (start_grid_limit). An InputError on
+// the first grid (no light reaches the receiver) propagates.
 inline TransportStart best_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
-                                           std::uint64_t seed, int threads) {
+                                           std::uint64_t seed, int threads, int max_grid = min_start_grid) {
     std::optional<TransportStart> best;
     const FlatFootprint fp = flat_footprint(scene, initial);
     const auto grid_of = [&](double cells_per_pixel) {
         TransportOptions options;
         options.cells_per_pixel = cells_per_pixel;
+        options.max_grid = max_grid;
         return transport_grid(scene, fp, options);
     };
     const auto same = [](const OtGrid& a, const OtGrid& b) { return a.nx == b.nx && a.ny == b.ny && a.hx == b.hx; };
@@ -130,6 +155,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
         TransportOptions options;
         options.ot.threads = threads;
         options.cells_per_pixel = cells_per_pixel;
+        options.max_grid = max_grid;
         options.strips = walls;
         TransportMap map = solve_transport(scene, initial, target_image, seed, options);
         TransportReport fitted = map.report;
@@ -163,8 +189,11 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
     return std::move(*best);
 }
 
+// The start a design begins from: the scene's own, or the best transport start
+// (best_transport_start) on grids of at most `max_grid` cells a side (start_grid_limit of
+// the design's time budget), judged against the flat surface.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
-                                     std::uint64_t seed, int threads) {
+                                     std::uint64_t seed, int threads, int max_grid = min_start_grid) {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
     DesignStart start;
@@ -187,7 +216,7 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     }
     std::optional<TransportStart> best;
     try {
-        best = best_transport_start(scene, initial, target_image, seed, threads);
+        best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
     } catch (const InputError& e) {
         if (scene.surface.initial_shape == InitialShape::transport) throw;
         fall_back(e.what());
