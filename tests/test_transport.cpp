@@ -285,20 +285,23 @@ TEST_CASE("transport start: deterministic, and the designer records it and plans
 }
 
 TEST_CASE("transport start: the grid follows the time budget, three cells per pixel where the budget allows") {
-    // The rule (design/start.hpp): about two fifths of the budget at 12 µs per cell, within
+    // The rule (design/start.hpp): the start estimated at two fifths of the budget or
+    // less (12 µs per cell of the fine grid and of the pixels' grid, 1 µs per ray), within
     // [768, 2048]; no budget: the largest.
-    CHECK(start_grid_limit(10) == min_start_grid);
-    CHECK(start_grid_limit(60) == 1414);
-    CHECK(start_grid_limit(120) == 2000);
-    CHECK(start_grid_limit(1e6) == max_start_grid);
-    CHECK(start_grid_limit(0) == max_start_grid);
-    for (double t = 1; t < 2000; t *= 1.7) CHECK(start_grid_limit(t) <= start_grid_limit(1.7 * t));
+    Scene s = testing::basic_scene(512, 32);  // 8.4 M rays, as a 513² mesh raises them to
+    CHECK(start_grid_limit(s, 10) == min_start_grid);
+    CHECK(start_grid_limit(s, 60) == 1019);   // sqrt((24 - 8.39) / 12e-6 - 512²)
+    CHECK(start_grid_limit(s, 120) == 1743);  // more than the 1536 that 3 cells per pixel ask
+    CHECK(start_grid_limit(s, 1e6) == max_start_grid);
+    CHECK(start_grid_limit(s, 0) == max_start_grid);
+    for (double t = 1; t < 2000; t *= 1.7) CHECK(start_grid_limit(s, t) <= start_grid_limit(s, 1.7 * t));
+    // More rays leave less of the budget to the grid: a 1024² receiver starts as before.
+    CHECK(start_grid_limit(testing::basic_scene(1024, 32), 60) == min_start_grid);
     // A 512² receiver asks for 1536 cells a side (3 per pixel): the limit decides how many
     // it gets, the sides rounded up to FFT-friendly counts.
-    Scene s = testing::basic_scene(512, 1);
     const Heightmap flat = testing::surface_for(s, 65);
     const FlatFootprint fp = flat_footprint(s, flat);
-    for (const int limit : {min_start_grid, start_grid_limit(60), max_start_grid}) {
+    for (const int limit : {min_start_grid, start_grid_limit(s, 60), max_start_grid}) {
         CAPTURE(limit);
         TransportOptions o;
         o.max_grid = limit;

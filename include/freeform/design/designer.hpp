@@ -233,7 +233,7 @@ inline int coarse_levels_to_skip(double start_error, int planned) {
 inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                  const DesignOptions& options, const std::vector<LevelPlan>& levels, int threads) {
     DesignStart start = make_design_start(scene, std::move(initial), target_image, options.seed, threads,
-                                          start_grid_limit(options.time_budget));
+                                          start_grid_limit(scene, options.time_budget));
     SharedStart shared;
     shared.report = start.report;
     shared.transport = start.map.has_value();

@@ -101,24 +101,32 @@ struct SharedStart {
 // 4 mm pixels), both give the same grid and it is solved once.
 inline constexpr std::array<double, 2> start_grid_cells_per_pixel{3.0, 1.0};
 
-// The largest side of the transport grid a design of `time_budget` seconds (0: none)
-// solves its start on. The start's error is set by the map at sub-pixel scale, so the grid
-// asks for three cells per receiver pixel (start_grid_cells_per_pixel); above 256² pixels
-// a fixed cap of 768 cells cut that to 1.5 at 512² and 0.75 at 1024², and the start paid:
-// a 512² photograph (Grace Hopper, the camera geometry, `design --start-only`) starts at a
-// cell-mean error (error_physical) of 0.0415 on 768², 0.0356 on 1024² and 0.0300 on
-// 1536², its bottom row, where the photograph is dark, getting 5 %, 18 % and 44 % of its
-// light. Finer grids cost time: the solves took 6.1, 9.7 and 31 s on 2 cores (about
-// 12 µs per cell for a whole solve). So the cap follows the budget: the grid whose solve
-// takes about two fifths of it at that rate, at least 768 (the former cap; short budgets
-// are as before) and at most 2048 (1536 s of budget and more, or no budget). A 60 s
-// design gets 1414, a 120 s one 2000. The rate is fixed, not measured, so the grid, and
-// with it the design, depends on the options alone.
+// The largest side of the transport grid a design of `scene` with `time_budget` seconds
+// (0: none) solves its start on. The start's error is set by the map at sub-pixel scale,
+// so the grid asks for three cells per receiver pixel (start_grid_cells_per_pixel); above
+// 256² pixels a fixed cap of 768 cells cut that to 1.5 at 512² and 0.75 at 1024², and the
+// start paid: a 512² photograph (Grace Hopper, the camera geometry, `design --start-only`)
+// starts at a cell-mean error (error_physical) of 0.0415 on 768², 0.0356 on 1024² and
+// 0.0300 on 1536², its bottom row, where the photograph is dark, getting 5 %, 18 % and
+// 44 % of its light. Finer grids cost time, and the start counts against the budget. So
+// the cap is the largest side whose start is estimated at two fifths of the budget or
+// less: about 12 µs per cell of the two grids solved (the fine one and the one of the
+// pixels; 6.1, 9.7 and 31 s for the three grids above on 2 cores) and 1 µs per ray the
+// level traces (the rays made, the fits judged by the exact tracer), never below 768 (the
+// former cap: short budgets and large receivers start as before) nor above 2048 (no
+// budget). A 512² receiver gets 1019 cells at 60 s and its full 1536 at 120 s; a 1024²
+// one 768 at 60 s. The rates are fixed, not measured, so the grid, and with it the
+// design, depends on the scene and the options alone.
 inline constexpr int min_start_grid = 768, max_start_grid = 2048;
-inline int start_grid_limit(double time_budget) {
+inline int start_grid_limit(const Scene& scene, double time_budget) {
     if (!(time_budget > 0)) return max_start_grid;
-    constexpr double solve_seconds_per_cell = 12e-6, budget_share = 0.4;
-    const double side = std::sqrt(budget_share * time_budget / solve_seconds_per_cell);
+    constexpr double seconds_per_cell = 12e-6, seconds_per_ray = 1e-6, budget_share = 0.4;
+    const double rays = double(ray_budget(scene.light, scene.receiver));
+    const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
+    const double cells = (budget_share * time_budget - seconds_per_ray * rays) / seconds_per_cell;
+    // side² + min(side, pixels_side)² ≤ cells: the fine grid and the grid of the pixels.
+    double side = std::sqrt(std::max(0.0, cells - pixels_side * pixels_side));
+    if (side < pixels_side) side = std::sqrt(std::max(0.0, cells / 2));
     return int(std::clamp(side, double(min_start_grid), double(max_start_grid)));
 }
 
