@@ -150,7 +150,13 @@ def chart(rows: list, out: Path) -> None:
     ax[0][1].legend(fontsize=8)
     ax[1][0].plot(r, [row["peak_memory_gib"] for row in rows], "o-")
     ax[1][0].set_ylabel("peak memory (GiB)")
-    ax[1][1].plot(r, [row["error_physical"] for row in rows], "o-")
+    ax[1][1].plot(r, [row["error_physical"] for row in rows], "o-", label="CPU, 2 cores")
+    before = [row for row in rows if "error_physical_before" in row]
+    if before:
+        # An earlier run of the same sizes, kept in scale.json for comparison (its label says which).
+        ax[1][1].plot([row["receiver"] for row in before], [row["error_physical_before"] for row in before], "s--",
+                      color="grey", label=before[0].get("before", "before"))
+        ax[1][1].legend(fontsize=8)
     ax[1][1].set_ylabel("error_physical at equal time")
     for a in (ax[0][0], ax[1][0], ax[1][1]):
         a.set_xlabel("receiver (pixels per side)")
