@@ -174,7 +174,7 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const DesignOption
     return levels;
 }
 
-// The final mesh: the scene's, or the last of `levels` (plan_levels(scene)) when it is
+// The final mesh: the scene's, or the last of `levels` (plan_levels(scene, options)) when it is
 // "auto".
 inline std::pair<int, int> final_mesh(const Scene& scene, const std::vector<LevelPlan>& levels) {
     if (scene.surface.nx > 0) return {scene.surface.nx, scene.surface.ny};
