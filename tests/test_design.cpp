@@ -573,8 +573,7 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
         CHECK(d.result.start.used == StartKind::transport);
         CHECK(d.result.start.plan == "the start only: no annealing");
         PlannedDesign plan = plan_design(job());
-        const DesignStart start = make_design_start(plan.scene, std::move(plan.initial), c.target,
-                                                    plan.options.seed, 1, start_grid_limit(plan.scene, plan.options.time_budget));
+        const DesignStart start = make_design_start(plan.scene, std::move(plan.initial), c.target, plan.options, 1);
         CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
         CHECK(phases == std::vector<std::string>{finding_the_start(c.scene)});
         CHECK(d.fitted.error > 0);

@@ -232,8 +232,7 @@ inline int coarse_levels_to_skip(double start_error, int planned) {
 // this once and share it (replicas.hpp, share_start).
 inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                  const DesignOptions& options, const std::vector<LevelPlan>& levels, int threads) {
-    DesignStart start = make_design_start(scene, std::move(initial), target_image, options.seed, threads,
-                                          start_grid_limit(scene, options.time_budget));
+    DesignStart start = make_design_start(scene, std::move(initial), target_image, options, threads);
     SharedStart shared;
     shared.report = start.report;
     shared.transport = start.map.has_value();
@@ -688,7 +687,8 @@ void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) 
     ProposalSettings all = proposals_for(d.moves.proposals, support);
     const int arms = int(all.bank.size());
     auto pre =
-        make_problem<Backend>(d, L, std::move(all), make_bandit(BanditKind::uniform, arms, d.options.proposals.bandit_sync));
+        make_problem<Backend>(d, L, std::move(all),
+                              make_bandit(BanditKind::uniform, arms, d.options.proposals.bandit_sync));
     const auto cal = calibrate(pre, hash_combine(stage_seed, 1), d.moves.schedule.initial_acceptance, d.timed);
     pre.set_reference_temperature(cal.temperature);
     AnnealOptions po;
@@ -887,7 +887,8 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     if (wants_preprocess(d, L.index, si)) preprocess<Backend>(d, L, support, stage_seed);
     ProposalSettings ps = proposals_for(d.moves.proposals, support, d.kept_arms);
     const int arms = std::max<int>(1, int(ps.bank.size()));
-    auto problem = make_problem<Backend>(d, L, ps, make_bandit(d.options.proposals.bandit, arms, d.options.proposals.bandit_sync));
+    const ProposalOptions& prop = d.options.proposals;
+    auto problem = make_problem<Backend>(d, L, ps, make_bandit(prop.bandit, arms, prop.bandit_sync));
     const Calibration cal = calibrate(problem, stage_seed, d.moves.schedule.initial_acceptance, d.timed);
     // Identity for one replica.
     const double t0 = d.replicas.common_temperature(cal.temperature * d.options.schedule.initial_temperature_scale);

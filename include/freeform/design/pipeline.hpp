@@ -259,9 +259,8 @@ namespace pipeline_detail {
 // The start of a planned design alone, as a DesignResult of no iterations.
 inline DesignResult start_only(PlannedDesign& plan, const ImageD& target) {
     const auto t0 = std::chrono::steady_clock::now();
-    DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.options.seed,
-                                          thread_count(exec::omp_t{plan.options.threads}),
-                                          start_grid_limit(plan.scene, plan.options.time_budget));
+    DesignStart start = make_design_start(plan.scene, std::move(plan.initial), target, plan.options,
+                                          thread_count(exec::omp_t{plan.options.threads}));
     DesignResult result;
     result.start = start.report;
     result.start.plan = "the start only: no annealing";

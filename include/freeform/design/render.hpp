@@ -212,8 +212,7 @@ inline RenderResult render(RenderRequest job, const RenderCallbacks& callbacks =
         scene.meshes.empty()) {
         if (callbacks.phase) callbacks.phase(finding_the_start(scene));
         if (scene.surface.initial_shape == InitialShape::transport) flat_footprint(scene, job.surface);
-        DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, job.options.seed, r.threads,
-                                           start_grid_limit(scene, job.options.time_budget));
+        DesignStart st = make_design_start(scene, std::move(job.surface), *job.target, job.options, r.threads);
         r.start = st.report;
         job.surface = std::move(st.surface);
     }

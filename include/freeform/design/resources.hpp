@@ -52,6 +52,7 @@ inline ResourcePlan plan_resources(const DesignJob& job, RunKind kind, int threa
                                    const std::vector<LevelPlan>* levels = nullptr) {
     const Scene& scene = job.scene;
     const DesignOptions& options = job.options;
+    const double min_rays = options.min_rays_per_mesh_cell;
     const double workers = threads > 0 ? threads : 64;
     const double cells = double(scene.receiver.width) * double(scene.receiver.height);
     ResourcePlan plan;
@@ -60,14 +61,14 @@ inline ResourcePlan plan_resources(const DesignJob& job, RunKind kind, int threa
         for (const LevelPlan& l : levels ? *levels : plan_levels(scene, options)) {
             const double level_cells = double(l.resolution_x) * double(l.resolution_y);
             const double per_cell = std::max({scene.light.rays_per_cell, options.coarse_rays_per_cell,
-                                              fitting_rays_per_cell(scene, options.min_rays_per_mesh_cell, l.mesh_x, l.mesh_y)});
+                                              fitting_rays_per_cell(scene, min_rays, l.mesh_x, l.mesh_y)});
             peak_rays = std::max(peak_rays, detail::rays_at(scene.light, per_cell, level_cells));
             mesh_vertices = std::max(mesh_vertices, double(l.mesh_x) * double(l.mesh_y));
         }
     } else {
         // A render of the surface uses the design's last-level rays (fitting_rays_per_cell).
         const double per_cell = scene.surface.nx > 0 && scene.surface.ny > 0
-                                    ? fitting_rays_per_cell(scene, options.min_rays_per_mesh_cell, scene.surface.nx, scene.surface.ny)
+                                    ? fitting_rays_per_cell(scene, min_rays, scene.surface.nx, scene.surface.ny)
                                     : scene.light.rays_per_cell;
         peak_rays = detail::rays_at(scene.light, std::max(per_cell, scene.light.rays_per_cell), cells);
     }

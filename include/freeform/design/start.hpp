@@ -19,6 +19,7 @@
 #include "../trace/heightfield.hpp"
 #include "../trace/setup.hpp"
 #include "../transport/start.hpp"
+#include "options.hpp"
 
 namespace freeform {
 
@@ -248,6 +249,15 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     }
     start.report.seconds = std::chrono::duration<double>(clock::now() - t0).count();
     return start;
+}
+
+// The start of a design with `options`: its seed, and the transport grid its time budget
+// affords (start_grid_limit). The designer, a start-only design and a render of a scene's
+// start all make it here, so that they make the same start.
+inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
+                                     const DesignOptions& options, int threads) {
+    return make_design_start(scene, std::move(initial), target_image, options.seed, threads,
+                             start_grid_limit(scene, options.time_budget));
 }
 
 }  // namespace freeform

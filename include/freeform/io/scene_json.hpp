@@ -671,7 +671,9 @@ struct OptimiseKey {
 
 // Keys that are not a plain field.
 inline void read_time_budget(const json& v, const std::string& p, DesignOptions& o) { o.time_budget = positive(v, p); }
-inline void write_time_budget(const DesignOptions& o, std::string_view n, json& j) { j[std::string(n)] = o.time_budget; }
+inline void write_time_budget(const DesignOptions& o, std::string_view n, json& j) {
+    j[std::string(n)] = o.time_budget;
+}
 
 inline void read_levels_key(const json& v, const std::string& p, DesignOptions& o) { o.levels = read_levels(v, p); }
 inline void write_levels_key(const DesignOptions& o, std::string_view n, json& j) {
