@@ -9,6 +9,7 @@
 #     GPU-against-CPU test and runs it; its exit status 77 means "no usable device".
 #
 # Inputs (-D): MODE, NVCC, HOST_COMPILER, SOURCE, OUTPUT, GPU_SOURCE, GPU_HOST_SOURCE,
+# BENCH_SOURCE, BENCH_HOST_SOURCE (compile mode: benchmarks/gpu's two halves),
 # INCLUDE_DIRS ('|'-separated), EXTRA_FLAGS (a command-line string).
 #
 # Both sides are compiled without FMA contraction (--fmad=false, -ffp-contract=off): the
@@ -108,14 +109,20 @@ if(MODE STREQUAL "compile")
   endforeach()
   run_step("nvcc on ${SOURCE}"
     "${NVCC}" ${nvcc_flags} ${hd_headers} -x cu -c "${SOURCE}" -o "${OUTPUT}")
-  if(GPU_SOURCE)
-    run_step("nvcc on ${GPU_SOURCE}"
-      "${NVCC}" ${nvcc_flags} -x cu -c "${GPU_SOURCE}" -o "${work_dir}/gpu_vs_cpu.o")
-  endif()
-  if(GPU_HOST_SOURCE)
-    run_step("${HOST_COMPILER} on ${GPU_HOST_SOURCE}"
-      "${HOST_COMPILER}" ${host_flags} -c "${GPU_HOST_SOURCE}" -o "${work_dir}/gpu_vs_cpu_host.o")
-  endif()
+  # The halves of the GPU-against-CPU test, and of the GPU tracing benchmark
+  # (benchmarks/gpu/run.sh), which must keep compiling where no device is lent to run it.
+  foreach(source IN ITEMS "${GPU_SOURCE}" "${BENCH_SOURCE}")
+    if(source)
+      get_filename_component(name "${source}" NAME_WE)
+      run_step("nvcc on ${source}" "${NVCC}" ${nvcc_flags} -x cu -c "${source}" -o "${work_dir}/${name}.o")
+    endif()
+  endforeach()
+  foreach(source IN ITEMS "${GPU_HOST_SOURCE}" "${BENCH_HOST_SOURCE}")
+    if(source)
+      get_filename_component(name "${source}" NAME_WE)
+      run_step("${HOST_COMPILER} on ${source}" "${HOST_COMPILER}" ${host_flags} -c "${source}" -o "${work_dir}/${name}.o")
+    endif()
+  endforeach()
   message(STATUS "freeform-cuda-check: passed (nvcc ${version}, host compiler ${HOST_COMPILER})")
   return()
 endif()

@@ -1,0 +1,135 @@
+// GPU tracing benchmark (benchmarks/gpu/run.sh): the GPU height-field tracer against the
+// CPU one on a scene's final mesh, its transport start as the surface.
+//
+//   trace_bench OUT.json [--repeats N] SCENE[@RESOLUTION] ...
+//
+// For each scene: a full trace (every ray traced and deposited, as a design's judgement
+// and each level's rebuild do) on 2 CPU threads (the project's reference machine), on
+// every CPU thread here, and on the GPU; and one move's retrace (the rays over a 5 × 5
+// vertex patch, through the move's overlay), which the annealer does per proposal. The
+// GPU's histogram and the move's records must equal the CPU's bit for bit. Writes one JSON
+// object per scene into OUT.json and a table on standard output.
+//
+// Exit status: 0 done, 1 a mismatch or an error, 2 bad arguments. Without a CUDA device
+// the CPU figures are still written, with "gpu": null.
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <freeform/cuda.hpp>
+
+#include "trace_bench.hpp"
+
+namespace {
+
+using namespace freeform;
+using namespace freeform::gpu_bench;
+using clock_type = std::chrono::steady_clock;
+
+double since(clock_type::time_point t0) { return std::chrono::duration<double>(clock_type::now() - t0).count(); }
+
+struct GpuTiming {
+    double full_seconds = 0, move_seconds = 0, upload_seconds = 0;
+    bool same_histogram = false, same_move = false;
+};
+
+GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, int repeats) {
+    GpuTiming g;
+    const auto t0 = clock_type::now();
+    cuda::DeviceHeightfieldTracer gpu(c.surface, c.rays, c.params);
+    g.upload_seconds = since(t0);
+    std::vector<double> full, move;
+    Histogram h(c.scene.receiver.width, c.scene.receiver.height);
+    TraceTotals totals;
+    gpu.trace_all(exec::cuda, h, totals);  // warm-up
+    for (int r = 0; r < repeats; ++r) {
+        Histogram hr(c.scene.receiver.width, c.scene.receiver.height);
+        const auto t1 = clock_type::now();
+        gpu.trace_all(exec::cuda, hr, totals);
+        full.push_back(since(t1));
+        h = std::move(hr);
+    }
+    g.same_histogram = h.cells == cpu.histogram.cells;
+    std::vector<RayRecord> records(c.move_rays.size());
+    gpu.trace(exec::cuda, c.move_rays, records, c.move);  // warm-up
+    for (int r = 0; r < std::max(repeats, 20); ++r) {
+        const auto t1 = clock_type::now();
+        gpu.trace(exec::cuda, c.move_rays, records, c.move);
+        move.push_back(since(t1));
+    }
+    g.same_move = records == cpu.move_records;
+    g.full_seconds = median(full);
+    g.move_seconds = median(move);
+    return g;
+}
+
+std::string number(double v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return b;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) try {
+    if (argc < 3) {
+        std::fprintf(stderr, "usage: trace_bench OUT.json [--repeats N] SCENE[@RESOLUTION] ...\n");
+        return 2;
+    }
+    const std::string out_path = argv[1];
+    int repeats = 5;
+    std::vector<std::pair<std::string, int>> scenes;
+    for (int a = 2; a < argc; ++a) {
+        const std::string arg = argv[a];
+        if (arg == "--repeats" && a + 1 < argc) {
+            repeats = std::max(1, std::atoi(argv[++a]));
+            continue;
+        }
+        const auto at = arg.rfind('@');
+        scenes.emplace_back(arg.substr(0, at), at == std::string::npos ? 0 : std::atoi(arg.c_str() + at + 1));
+    }
+    const int threads = std::max(1u, std::thread::hardware_concurrency());
+    const bool device = cuda::device_count() > 0;
+    std::printf("%s; %d CPU threads here\n", device ? "CUDA device found" : "no CUDA device: CPU figures only",
+                threads);
+    std::ofstream out(out_path);
+    out << "[\n";
+    int failures = 0;
+    for (std::size_t k = 0; k < scenes.size(); ++k) {
+        const BenchCase c = make_case(scenes[k].first, scenes[k].second, threads);
+        const CpuTiming cpu2 = time_cpu(c, 2, repeats);
+        const CpuTiming cpun = time_cpu(c, threads, repeats);
+        const double rays = double(c.rays.size()), move_rays = double(c.move_rays.size());
+        std::printf("%s: %.0f rays, a move retraces %.0f\n", c.name.c_str(), rays, move_rays);
+        std::printf("  full trace: CPU 2 threads %.4f s, CPU %d threads %.4f s\n", cpu2.full_seconds, threads,
+                    cpun.full_seconds);
+        out << " {\"scene\": \"" << scenes[k].first << "\", \"name\": \"" << c.name << "\", \"rays\": " << c.rays.size()
+            << ", \"move_rays\": " << c.move_rays.size() << ", \"cpu2_full_s\": " << number(cpu2.full_seconds)
+            << ", \"cpu_threads\": " << threads << ", \"cpu_full_s\": " << number(cpun.full_seconds)
+            << ", \"cpu_move_s\": " << number(cpu2.move_seconds) << ", \"gpu\": ";
+        if (!device) {
+            out << "null}";
+        } else {
+            const GpuTiming g = time_gpu(c, cpu2, repeats);
+            std::printf("  full trace: GPU %.5f s (%.1fx 2 CPU threads), upload %.3f s; histogram %s\n", g.full_seconds,
+                        cpu2.full_seconds / g.full_seconds, g.upload_seconds, g.same_histogram ? "equal" : "DIFFERS");
+            std::printf("  one move: CPU 1 thread %.1f us, GPU %.1f us (a launch each); records %s\n",
+                        1e6 * cpu2.move_seconds, 1e6 * g.move_seconds, g.same_move ? "equal" : "DIFFER");
+            failures += !g.same_histogram + !g.same_move;
+            out << "{\"full_s\": " << number(g.full_seconds) << ", \"move_s\": " << number(g.move_seconds)
+                << ", \"upload_s\": " << number(g.upload_seconds)
+                << ", \"same_histogram\": " << (g.same_histogram ? "true" : "false")
+                << ", \"same_move\": " << (g.same_move ? "true" : "false") << "}}";
+        }
+        out << (k + 1 < scenes.size() ? ",\n" : "\n");
+    }
+    out << "]\n";
+    return failures == 0 ? 0 : 1;
+} catch (const std::exception& e) {
+    std::fprintf(stderr, "trace_bench: %s\n", e.what());
+    return 1;
+}

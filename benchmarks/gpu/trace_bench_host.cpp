@@ -1,0 +1,100 @@
+// The CPU half of the GPU tracing benchmark (see trace_bench.cu and run.sh), compiled by
+// the host compiler with the flags of a CPU build and without FMA contraction.
+#include <algorithm>
+#include <chrono>
+#include <utility>
+
+#include <freeform/design/designer.hpp>
+#include <freeform/design/start.hpp>
+#include <freeform/io/scene_file.hpp>
+#include <freeform/io/target.hpp>
+#include <freeform/trace/heightfield.hpp>
+#include <freeform/trace/heightfield_kernel.hpp>
+#include <freeform/trace/setup.hpp>
+
+#include "trace_bench.hpp"
+
+namespace freeform::gpu_bench {
+
+namespace {
+
+// A move in the middle of the surface: 5 × 5 vertices raised by a few micrometres, and
+// the rays that enter over its cells (the rays a move's retrace starts from).
+void add_move(BenchCase& c) {
+    const Heightmap& hm = c.surface;
+    HeightOverlay& o = c.move;
+    const int i0 = hm.nx() / 2 - 2, j0 = hm.ny() / 2 - 2;
+    o.patch = Patch{i0, j0, i0 + 4, j0 + 4};
+    for (int j = o.patch.j0; j <= o.patch.j1; ++j)
+        for (int i = o.patch.i0; i <= o.patch.i1; ++i)
+            o.heights.push_back(hm.clamp_height(hm(i, j) + 2e-6f * float((i + 2 * j) % 5 - 2)));
+    o.finish(hm);
+    // Surface frame: a ray's path meets the plane w = 0 over the patch's cells.
+    const double u0 = hm.u_of(i0 - 1), u1 = hm.u_of(i0 + 5), v0 = hm.v_of(j0 - 1), v1 = hm.v_of(j0 + 5);
+    for (std::int64_t k = 0; k < c.rays.size(); ++k) {
+        const Vec3d org(c.rays.origin[std::size_t(k)]), d(c.rays.direction[std::size_t(k)]);
+        if (d.z == 0) continue;
+        const Vec3d p = org + d * (-org.z / d.z);
+        if (p.x >= u0 && p.x <= u1 && p.y >= v0 && p.y <= v1) c.move_rays.push_back(std::int32_t(k));
+    }
+}
+
+}  // namespace
+
+BenchCase make_case(const std::string& scene_file, int resolution, int threads) {
+    DesignJob job = io::load_job(scene_file);
+    Scene& s = job.scene;
+    if (resolution > 0) s.receiver.width = s.receiver.height = resolution;
+    const ImageD target = io::load_target_image(s);
+    const auto [nx, ny] = final_mesh(s, job.options);
+    Heightmap flat(nx, ny, s.surface.size, s.surface.h_min, s.surface.h_max, s.surface.frame, s.surface.aperture);
+    DesignStart start = make_design_start(s, std::move(flat), target, job.options, threads);
+    BenchCase c;
+    c.name = s.name + " " + std::to_string(s.receiver.width) + "x" + std::to_string(s.receiver.height);
+    c.rays = generate_rays(s.light, start.surface, s.receiver, 7);
+    c.params = make_path_params(s);
+    c.surface = std::move(start.surface);
+    c.scene = std::move(s);
+    add_move(c);
+    return c;
+}
+
+double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+CpuTiming time_cpu(const BenchCase& c, int threads, int repeats) {
+    using clock = std::chrono::steady_clock;
+    const HeightfieldTracer tracer(c.surface, c.rays, c.params);
+    CpuTiming t{Histogram(c.scene.receiver.width, c.scene.receiver.height), {}, 0, 0, {}};
+    std::vector<double> full, move;
+    for (int r = 0; r < repeats; ++r) {
+        Histogram h(c.scene.receiver.width, c.scene.receiver.height);
+        TraceTotals totals;
+        const auto t0 = clock::now();
+        if (threads == 1)
+            tracer.trace_all(exec::seq, h, totals);
+        else
+            tracer.trace_all(exec::omp_t{threads}, h, totals);
+        full.push_back(std::chrono::duration<double>(clock::now() - t0).count());
+        t.histogram = std::move(h), t.totals = totals;
+    }
+    const OverlayView view = overlay_view(c.surface, c.move);
+    std::vector<RayRecord> records(c.move_rays.size());
+    for (int r = 0; r < std::max(repeats, 20); ++r) {
+        const auto t0 = clock::now();
+        for (std::size_t k = 0; k < c.move_rays.size(); ++k) {
+            const auto id = std::size_t(c.move_rays[k]);
+            records[k] =
+                trace_heightfield_ray(view, c.params, c.rays.origin[id], c.rays.direction[id], NoCellVisitor{});
+        }
+        move.push_back(std::chrono::duration<double>(clock::now() - t0).count());
+    }
+    t.move_records = std::move(records);
+    t.full_seconds = median(full);
+    t.move_seconds = median(move);
+    return t;
+}
+
+}  // namespace freeform::gpu_bench
