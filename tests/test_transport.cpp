@@ -414,17 +414,23 @@ TEST_CASE("Neumann Poisson (FFT cosine transforms) solves the 5-point Laplacian 
 
 namespace {
 
-// The worst row mean and the worst column mean of `surface`'s irradiance minus the target's,
-// as fractions of the target's mean cell, over the rows and columns [skip, n − skip): the
-// measure of a cross or a band across the image. Exact height-field tracer, nearest deposit.
-std::pair<double, double> worst_row_column(const Scene& s, const Heightmap& surface, const ImageD& target, int skip) {
+// `surface`'s irradiance (exact height-field tracer, nearest deposit) and the target
+// scaled to the light it emits.
+std::pair<Histogram, Target> irradiance_and_target(const Scene& s, const Heightmap& surface, const ImageD& target) {
     const RaySet rays = generate_rays(s.light, surface, s.receiver, 3);
-    const PathParams pp = make_path_params(s);
-    const HeightfieldTracer tracer(surface, rays, pp);
+    const HeightfieldTracer tracer(surface, rays, make_path_params(s));
     Histogram hist(s.receiver.width, s.receiver.height);
     TraceTotals totals;
     tracer.trace_all(exec::omp_t{2}, hist, totals);
-    const Target t = make_target(target, s.receiver.width, s.receiver.height, totals.emitted);
+    Target t = make_target(target, s.receiver.width, s.receiver.height, totals.emitted);
+    return {std::move(hist), std::move(t)};
+}
+
+// The worst row mean and the worst column mean of `surface`'s irradiance minus the target's,
+// as fractions of the target's mean cell, over the rows and columns [skip, n − skip): the
+// measure of a cross or a band across the image.
+std::pair<double, double> worst_row_column(const Scene& s, const Heightmap& surface, const ImageD& target, int skip) {
+    const auto [hist, t] = irradiance_and_target(s, surface, target);
     const int w = s.receiver.width, h = s.receiver.height;
     const double mean = double(t.total) / (double(w) * h);
     double row = 0, col = 0;
@@ -443,14 +449,10 @@ std::pair<double, double> worst_row_column(const Scene& s, const Heightmap& surf
 
 // The light the outermost rows and columns of `surface`'s irradiance get, as fractions
 // of the target's there, the least of the four: a dark or bright frame along the edges.
-// Exact height-field tracer, nearest deposit.
 double worst_edge_ratio(const Scene& s, const Heightmap& surface, const ImageD& target) {
-    const RaySet rays = generate_rays(s.light, surface, s.receiver, 3);
-    const HeightfieldTracer tracer(surface, rays, make_path_params(s));
-    Histogram hist(s.receiver.width, s.receiver.height);
-    TraceTotals totals;
-    tracer.trace_all(exec::omp_t{2}, hist, totals);
-    const Target t = make_target(target, s.receiver.width, s.receiver.height, totals.emitted);
+    const auto traced = irradiance_and_target(s, surface, target);
+    const Histogram& hist = traced.first;  // named, not bound: clang 14 cannot capture bindings
+    const Target& t = traced.second;
     const int w = s.receiver.width, h = s.receiver.height;
     const auto ratio = [&](int x0, int y0, int dx, int dy, int n) {
         double got = 0, want = 0;
