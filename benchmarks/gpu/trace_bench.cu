@@ -12,10 +12,12 @@
 //
 // Exit status: 0 done, 1 a mismatch or an error, 2 bad arguments. Without a CUDA device
 // the CPU figures are still written, with "gpu": null.
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <exception>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -67,6 +69,14 @@ GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, int repeats) {
     return g;
 }
 
+// A whole number ≥ 1 from an argument, or nothing (the caller names the argument).
+std::optional<int> positive(const std::string& text) {
+    int v = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (ec != std::errc{} || end != text.data() + text.size() || v < 1) return std::nullopt;
+    return v;
+}
+
 std::string number(double v) {
     char b[64];
     std::snprintf(b, sizeof b, "%.6g", v);
@@ -85,12 +95,25 @@ int main(int argc, char** argv) try {
     std::vector<std::pair<std::string, int>> scenes;
     for (int a = 2; a < argc; ++a) {
         const std::string arg = argv[a];
-        if (arg == "--repeats" && a + 1 < argc) {
-            repeats = std::max(1, std::atoi(argv[++a]));
+        if (arg == "--repeats") {
+            const std::string value = a + 1 < argc ? argv[++a] : "";
+            const auto n = positive(value);
+            if (!n) {
+                std::fprintf(stderr, "trace_bench: --repeats: expected a whole number >= 1, got \"%s\"\n",
+                             value.c_str());
+                return 2;
+            }
+            repeats = *n;
             continue;
         }
         const auto at = arg.rfind('@');
-        scenes.emplace_back(arg.substr(0, at), at == std::string::npos ? 0 : std::atoi(arg.c_str() + at + 1));
+        const auto resolution = at == std::string::npos ? std::optional<int>(0) : positive(arg.substr(at + 1));
+        if (!resolution) {
+            std::fprintf(stderr, "trace_bench: %s: the resolution after '@' must be a whole number >= 1\n",
+                         arg.c_str());
+            return 2;
+        }
+        scenes.emplace_back(arg.substr(0, at), *resolution);
     }
     const int threads = std::max(1u, std::thread::hardware_concurrency());
     const bool device = cuda::device_count() > 0;
