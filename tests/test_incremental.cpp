@@ -9,6 +9,7 @@
 #include <freeform/anneal/annealer.hpp>
 #include <freeform/design/problem.hpp>
 #include <freeform/trace/incremental.hpp>
+#include <freeform/trace/window.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
 #include <freeform/design/embree_incremental.hpp>
 #endif
@@ -129,15 +130,25 @@ std::vector<Case> cases() {
     return out;
 }
 
+// A case's rippled surface, its rays and its path parameters.
+struct Rippled {
+    Heightmap hm;
+    RaySet rays;
+    PathParams pp;
+};
+Rippled rippled(const Case& c) {
+    Heightmap hm = surface_for(c.scene, c.mesh);
+    shape(hm, [](double u, double v) { return 0.001 * std::sin(80 * u) * std::cos(70 * v); });
+    RaySet rays = generate_rays(c.scene.light, hm, c.scene.receiver, 5);
+    return {std::move(hm), std::move(rays), make_path_params(c.scene)};
+}
+
 }  // namespace
 
 TEST_CASE("incremental histogram equals a full retrace after thousands of mixed moves") {
     for (const Case& c : cases()) {
         CAPTURE(c.name);
-        Heightmap hm = surface_for(c.scene, c.mesh);
-        shape(hm, [](double u, double v) { return 0.001 * std::sin(80 * u) * std::cos(70 * v); });
-        const RaySet rays = generate_rays(c.scene.light, hm, c.scene.receiver, 5);
-        const PathParams pp = make_path_params(c.scene);
+        auto [hm, rays, pp] = rippled(c);
         IncrementalTrace inc(hm, rays, pp);
         Histogram hist = inc.rebuild(exec::seq);
         // A twin that evaluates and commits every move with three threads: its state must
@@ -220,6 +231,68 @@ TEST_CASE("incremental histogram equals a full retrace after thousands of mixed 
         MESSAGE(std::string(c.name), ": ", culled, " of ", listed, " listed rays out of reach");
         CHECK(culled > 0);
         CHECK(culled < listed);
+    }
+}
+
+namespace {
+
+// Whether a window's change of one move is the one evaluate() gives it: the same rays
+// selected, the same change of every histogram cell and of the weight per status.
+bool same_totals(const WindowEvaluation& w, std::size_t p, const TraceChange& single) {
+    const WindowChange& c = w.change(p);
+    std::vector<std::pair<std::int32_t, Fixed>> window, expected;
+    for (std::size_t k = 0; k < c.cells.size(); ++k) window.emplace_back(c.cells[k], c.values[k]);
+    for (std::int32_t cell = 0; cell < std::int32_t(single.histogram.value.size()); ++cell) {
+        const Fixed v = single.histogram.value[std::size_t(cell)];
+        if (v != 0) expected.emplace_back(cell, v);
+    }
+    std::sort(window.begin(), window.end());
+    const auto rays = w.rays_of(p);
+    return std::equal(rays.begin(), rays.end(), single.rays.begin(), single.rays.end()) && window == expected &&
+           c.status_delta == single.status_delta && c.rays_moved == single.rays_moved;
+}
+
+}  // namespace
+
+TEST_CASE("a window of moves evaluated together gives each move evaluate()'s change, on one thread or two") {
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        auto [hm, rays, pp] = rippled(c);
+        IncrementalTrace inc(hm, rays, pp);
+        inc.rebuild(exec::seq);
+        CounterRng rng(7, 0);
+        std::vector<HeightOverlay> window(8);
+        WindowEvaluation serial, threaded;
+        TraceChange single;
+        int differ = 0, moving = 0, committed = 0;
+        std::int64_t pairs = 0;
+        for (int w = 0; w < 40; ++w) {
+            for (HeightOverlay& o : window) random_bump(hm, rng, o);
+            serial.evaluate(exec::seq, inc, window);
+            threaded.evaluate(exec::omp_t{2}, inc, window);
+            REQUIRE(serial.size() == window.size());
+            pairs += std::int64_t(serial.pairs());
+            int first_moving = -1;
+            for (std::size_t p = 0; p < window.size(); ++p) {
+                inc.evaluate(window[p], single);
+                differ += same_totals(serial, p, single) && same_totals(threaded, p, single) ? 0 : 1;
+                if (single.rays_moved > 0) ++moving, first_moving = first_moving < 0 ? int(p) : first_moving;
+            }
+            // The window's first move that moves light is accepted, as a window's first
+            // accepted proposal is: the next window is judged against the new state.
+            if (first_moving >= 0) {
+                inc.evaluate(window[std::size_t(first_moving)], single);
+                window[std::size_t(first_moving)].commit(hm);
+                inc.commit(single);
+                ++committed;
+            }
+        }
+        CHECK(differ == 0);
+        CHECK(moving > 100);  // the moves really moved light
+        CHECK(committed > 20);
+        CHECK(pairs > 1000);
+        // After the commits the maintained trace is still a full retrace's.
+        CHECK(inc.histogram() == trace_scene(c.scene, hm, rays).histogram);
     }
 }
 

@@ -6,8 +6,11 @@
 // For each scene: a full trace (every ray traced and deposited, as a design's judgement
 // and each level's rebuild do) on 2 CPU threads (the project's reference machine), on
 // every CPU thread here, and on the GPU; and one move's retrace (the rays over a 5 × 5
-// vertex patch, through the move's overlay), which the annealer does per proposal. The
-// GPU's histogram and the move's records must equal the CPU's bit for bit. Writes one JSON
+// vertex patch, through the move's overlay), which the annealer does per proposal; and a
+// window of 64 such moves (trace/window.hpp): one by one on the CPU as the annealer
+// evaluates them, together on 2 CPU threads, and their rays retraced in one GPU launch.
+// The GPU's histogram, the move's records and the window's records must equal the CPU's
+// bit for bit. Writes one JSON
 // object per scene into OUT.json and a table on standard output.
 //
 // Exit status: 0 done, 1 a mismatch or an error, 2 bad arguments. Without a CUDA device
@@ -35,11 +38,11 @@ using clock_type = std::chrono::steady_clock;
 double since(clock_type::time_point t0) { return std::chrono::duration<double>(clock_type::now() - t0).count(); }
 
 struct GpuTiming {
-    double full_seconds = 0, move_seconds = 0, upload_seconds = 0;
-    bool same_histogram = false, same_move = false;
+    double full_seconds = 0, move_seconds = 0, upload_seconds = 0, window_seconds = 0;
+    bool same_histogram = false, same_move = false, same_window = false;
 };
 
-GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, int repeats) {
+GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, const WindowTiming& window, int repeats) {
     GpuTiming g;
     const auto t0 = clock_type::now();
     cuda::DeviceHeightfieldTracer gpu(c.surface, c.rays, c.params);
@@ -64,6 +67,17 @@ GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, int repeats) {
         move.push_back(since(t1));
     }
     g.same_move = records == cpu.move_records;
+    // The window's pairs in one launch (overlays, views and pairs uploaded, records back).
+    std::vector<RayRecord> window_records(window.rays.size());
+    std::vector<double> windows;
+    gpu.trace_window(exec::cuda, c.window, window.proposals, window.rays, window_records);  // warm-up
+    for (int r = 0; r < std::max(repeats, 20); ++r) {
+        const auto t1 = clock_type::now();
+        gpu.trace_window(exec::cuda, c.window, window.proposals, window.rays, window_records);
+        windows.push_back(since(t1));
+    }
+    g.same_window = window_records == window.records;
+    g.window_seconds = median(windows);
     g.full_seconds = median(full);
     g.move_seconds = median(move);
     return g;
@@ -126,25 +140,49 @@ int main(int argc, char** argv) try {
         const BenchCase c = make_case(scenes[k].first, scenes[k].second, threads);
         const CpuTiming cpu2 = time_cpu(c, 2, repeats);
         const CpuTiming cpun = time_cpu(c, threads, repeats);
+        const WindowTiming win = time_window_cpu(c, repeats);
+        const double moves = double(c.window.size());
         const double rays = double(c.rays.size()), move_rays = double(c.move_rays.size());
         std::printf("%s: %.0f rays, a move retraces %.0f\n", c.name.c_str(), rays, move_rays);
         std::printf("  full trace: CPU 2 threads %.4f s, CPU %d threads %.4f s\n", cpu2.full_seconds, threads,
                     cpun.full_seconds);
+        std::printf(
+            "  window of %.0f moves (%zu rays): one by one %.0f moves/s (1 thread), together %.0f moves/s "
+            "(2 threads: select %.2f ms, retrace %.2f ms, sum %.2f ms); changes %s\n",
+            moves, win.rays.size(), moves / win.per_move_seconds, moves / win.window_seconds, 1e3 * win.select_seconds,
+            1e3 * win.retrace_seconds, 1e3 * win.sum_seconds, win.same_changes ? "equal" : "DIFFER");
+        failures += !win.same_changes;
         out << " {\"scene\": \"" << scenes[k].first << "\", \"name\": \"" << c.name << "\", \"rays\": " << c.rays.size()
             << ", \"move_rays\": " << c.move_rays.size() << ", \"cpu2_full_s\": " << number(cpu2.full_seconds)
             << ", \"cpu_threads\": " << threads << ", \"cpu_full_s\": " << number(cpun.full_seconds)
-            << ", \"cpu_move_s\": " << number(cpu2.move_seconds) << ", \"gpu\": ";
+            << ", \"cpu_move_s\": " << number(cpu2.move_seconds) << ", \"window_moves\": " << c.window.size()
+            << ", \"window_rays\": " << win.rays.size()
+            << ", \"cpu_window_one_by_one_s\": " << number(win.per_move_seconds)
+            << ", \"cpu2_window_s\": " << number(win.window_seconds)
+            << ", \"window_select_s\": " << number(win.select_seconds)
+            << ", \"cpu2_window_retrace_s\": " << number(win.retrace_seconds)
+            << ", \"window_sum_s\": " << number(win.sum_seconds)
+            << ", \"window_same_changes\": " << (win.same_changes ? "true" : "false") << ", \"gpu\": ";
         if (!device) {
             out << "null}";
         } else {
-            const GpuTiming g = time_gpu(c, cpu2, repeats);
+            const GpuTiming g = time_gpu(c, cpu2, win, repeats);
             std::printf("  full trace: GPU %.5f s (%.1fx 2 CPU threads), upload %.3f s; histogram %s\n", g.full_seconds,
                         cpu2.full_seconds / g.full_seconds, g.upload_seconds, g.same_histogram ? "equal" : "DIFFERS");
             std::printf("  one move: CPU 1 thread %.1f us, GPU %.1f us (a launch each); records %s\n",
                         1e6 * cpu2.move_seconds, 1e6 * g.move_seconds, g.same_move ? "equal" : "DIFFER");
-            failures += !g.same_histogram + !g.same_move;
+            // A window on the GPU: the host's selection and sums around the device's retrace.
+            const double gpu_window = win.select_seconds + g.window_seconds + win.sum_seconds;
+            std::printf(
+                "  window on the GPU: retrace %.2f ms (a launch), %.0f moves/s with the host's select and sum "
+                "(%.1fx one by one on 1 CPU thread); records %s\n",
+                1e3 * g.window_seconds, moves / gpu_window, win.per_move_seconds / gpu_window,
+                g.same_window ? "equal" : "DIFFER");
+            failures += !g.same_histogram + !g.same_move + !g.same_window;
             out << "{\"full_s\": " << number(g.full_seconds) << ", \"move_s\": " << number(g.move_seconds)
                 << ", \"upload_s\": " << number(g.upload_seconds)
+                << ", \"window_retrace_s\": " << number(g.window_seconds)
+                << ", \"same_window\": " << (g.same_window ? "true" : "false")
                 << ", \"same_histogram\": " << (g.same_histogram ? "true" : "false")
                 << ", \"same_move\": " << (g.same_move ? "true" : "false") << "}}";
         }

@@ -25,6 +25,7 @@ struct BenchCase {
     PathParams params;
     HeightOverlay move;                   // a move as the annealer proposes them: a 5 × 5 vertex patch
     std::vector<std::int32_t> move_rays;  // the rays that enter the move's cells from above
+    std::vector<HeightOverlay> window;    // a window of such moves spread over the surface (trace/window.hpp)
 };
 
 // `resolution` > 0 overrides the receiver's resolution (square); `threads` is used for
@@ -41,6 +42,20 @@ struct CpuTiming {
 
 // HeightfieldTracer on `threads` OpenMP threads (1: exec::seq).
 CpuTiming time_cpu(const BenchCase& c, int threads, int repeats);
+
+// The window's moves evaluated against the case's surface (IncrementalTrace): one after
+// another with IncrementalTrace::evaluate, as the annealer does on one thread, and
+// together with WindowEvaluation on 2 threads, whose three steps are timed apart. The
+// pairs and their records are kept for the GPU's retrace of the same pairs.
+struct WindowTiming {
+    double per_move_seconds = 0;  // the window's moves evaluated one by one, the median
+    double window_seconds = 0;    // WindowEvaluation::evaluate on 2 threads, the median
+    double select_seconds = 0, retrace_seconds = 0, sum_seconds = 0;  // its steps, medians
+    bool same_changes = false;                                        // every move's change equal to evaluate()'s
+    std::vector<std::int32_t> proposals, rays;
+    std::vector<RayRecord> records;
+};
+WindowTiming time_window_cpu(const BenchCase& c, int repeats);
 
 double median(std::vector<double> v);
 

@@ -10,7 +10,9 @@
 #include <freeform/io/target.hpp>
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
+#include <freeform/trace/incremental.hpp>
 #include <freeform/trace/setup.hpp>
+#include <freeform/trace/window.hpp>
 
 #include "trace_bench.hpp"
 
@@ -39,6 +41,27 @@ void add_move(BenchCase& c) {
     }
 }
 
+// A window of 64 moves like add_move's, on an 8 × 8 lattice over the middle half of the
+// surface, raised or lowered by turns.
+void add_window(BenchCase& c) {
+    const Heightmap& hm = c.surface;
+    for (int b = 0; b < 8; ++b)
+        for (int a = 0; a < 8; ++a) {
+            HeightOverlay o;
+            const int i0 = hm.nx() / 4 + a * (hm.nx() / 2) / 8, j0 = hm.ny() / 4 + b * (hm.ny() / 2) / 8;
+            o.patch = Patch{i0, j0, i0 + 4, j0 + 4}.clipped(hm.nx(), hm.ny());
+            const float step = (a + b) % 2 == 0 ? 2e-6f : -2e-6f;
+            for (int j = o.patch.j0; j <= o.patch.j1; ++j)
+                for (int i = o.patch.i0; i <= o.patch.i1; ++i) o.heights.push_back(hm.clamp_height(hm(i, j) + step));
+            o.finish(hm);
+            c.window.push_back(std::move(o));
+        }
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 }  // namespace
 
 BenchCase make_case(const std::string& scene_file, int resolution, int threads) {
@@ -56,6 +79,7 @@ BenchCase make_case(const std::string& scene_file, int resolution, int threads) 
     c.surface = std::move(start.surface);
     c.scene = std::move(s);
     add_move(c);
+    add_window(c);
     return c;
 }
 
@@ -77,7 +101,7 @@ CpuTiming time_cpu(const BenchCase& c, int threads, int repeats) {
             tracer.trace_all(exec::seq, h, totals);
         else
             tracer.trace_all(exec::omp_t{threads}, h, totals);
-        full.push_back(std::chrono::duration<double>(clock::now() - t0).count());
+        full.push_back(seconds_since(t0));
         t.histogram = std::move(h), t.totals = totals;
     }
     const OverlayView view = overlay_view(c.surface, c.move);
@@ -89,11 +113,61 @@ CpuTiming time_cpu(const BenchCase& c, int threads, int repeats) {
             records[k] =
                 trace_heightfield_ray(view, c.params, c.rays.origin[id], c.rays.direction[id], NoCellVisitor{});
         }
-        move.push_back(std::chrono::duration<double>(clock::now() - t0).count());
+        move.push_back(seconds_since(t0));
     }
     t.move_records = std::move(records);
     t.full_seconds = median(full);
     t.move_seconds = median(move);
+    return t;
+}
+
+WindowTiming time_window_cpu(const BenchCase& c, int repeats) {
+    using clock = std::chrono::steady_clock;
+    IncrementalTrace trace(c.surface, c.rays, c.params);
+    trace.rebuild(exec::omp_t{2});
+    WindowTiming t;
+    std::vector<double> per_move, window, select, retrace, sum;
+    std::vector<TraceChange> single(c.window.size());
+    WindowEvaluation w;
+    for (int r = 0; r < std::max(repeats, 10); ++r) {
+        auto t0 = clock::now();
+        for (std::size_t p = 0; p < c.window.size(); ++p) trace.evaluate(c.window[p], single[p]);
+        per_move.push_back(seconds_since(t0));
+        t0 = clock::now();
+        w.evaluate(exec::omp_t{2}, trace, c.window);
+        window.push_back(seconds_since(t0));
+        t0 = clock::now();
+        w.select(trace, c.window);
+        select.push_back(seconds_since(t0));
+        t0 = clock::now();
+        w.retrace(exec::omp_t{2}, trace, c.window);
+        retrace.push_back(seconds_since(t0));
+        t0 = clock::now();
+        w.sum(trace);
+        sum.push_back(seconds_since(t0));
+    }
+    t.same_changes = true;
+    for (std::size_t p = 0; p < c.window.size(); ++p) {
+        const WindowChange& a = w.change(p);
+        const TraceChange& b = single[p];
+        const auto rays = w.rays_of(p);
+        bool same = std::equal(rays.begin(), rays.end(), b.rays.begin(), b.rays.end()) &&
+                    a.status_delta == b.status_delta && a.rays_moved == b.rays_moved;
+        std::int64_t nonzero = 0;
+        for (const Fixed v : b.histogram.value) nonzero += v != 0;
+        same = same && nonzero == std::int64_t(a.cells.size());
+        for (std::size_t k = 0; k < a.cells.size(); ++k)
+            same = same && b.histogram.value[std::size_t(a.cells[k])] == a.values[k];
+        t.same_changes = t.same_changes && same;
+    }
+    t.per_move_seconds = median(per_move);
+    t.window_seconds = median(window);
+    t.select_seconds = median(select);
+    t.retrace_seconds = median(retrace);
+    t.sum_seconds = median(sum);
+    t.proposals.assign(w.proposals().begin(), w.proposals().end());
+    t.rays.assign(w.rays().begin(), w.rays().end());
+    t.records.assign(w.records().begin(), w.records().end());
     return t;
 }
 

@@ -87,6 +87,31 @@ void host_checks(const Case& c) {
                 static_cast<long long>(ref.totals.rays), split.c_str());
 }
 
+// A window of moves in one launch (trace_window, trace/window.hpp): `o`, the same move a
+// little higher, and an empty one, each with every other ray, the pairs interleaved.
+void window_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, const HeightOverlay& o,
+                   cudaStream_t stream) {
+    std::vector<HeightOverlay> moves{o, o, HeightOverlay{}};
+    for (float& h : moves[1].heights) h = c.surface.clamp_height(h + 1e-5f);
+    moves[1].finish(c.surface);
+    std::vector<std::int32_t> proposal, ray;
+    for (std::int32_t k = 0; k < std::int32_t(c.rays.size()); k += 2)
+        for (std::int32_t p = 0; p < 3; ++p) proposal.push_back(p), ray.push_back(k);
+    std::vector<RayRecord> on_gpu(ray.size()), on_host(ray.size());
+    gpu.trace_window(exec::cuda_t{stream}, moves, proposal, ray, on_gpu);
+    gpu.trace_window(exec::omp, moves, proposal, ray, on_host);
+    std::vector<RayRecord> expected(ray.size());
+    for (std::int32_t p = 0; p < 3; ++p) {
+        std::vector<std::int32_t> ids;
+        for (std::size_t k = std::size_t(p); k < ray.size(); k += 3) ids.push_back(ray[k]);
+        const std::vector<RayRecord> one = cpu_trace(c, ids, moves[std::size_t(p)]);
+        for (std::size_t m = 0; m < one.size(); ++m) expected[std::size_t(p) + 3 * m] = one[m];
+    }
+    expect(on_gpu == expected, c.name + ": GPU window of three moves");
+    expect(on_host == expected, c.name + ": host window of three moves");
+    expect(!(on_gpu == cpu_trace(c, ray)), c.name + ": the window's moves change some records");
+}
+
 void gpu_checks(Case& c, cudaStream_t stream) {
     const PathParams pp = make_path_params(c.scene);
     cuda::DeviceHeightfieldTracer gpu(c.surface, c.rays, pp);
@@ -119,6 +144,7 @@ void gpu_checks(Case& c, cudaStream_t stream) {
     const std::vector<RayRecord> preview_cpu = cpu_trace(c, all, o);
     expect(preview_gpu == preview_cpu, c.name + ": GPU records through an overlay");
     expect(preview_host == preview_cpu, c.name + ": host records through an overlay");
+    window_checks(c, gpu, o, stream);
     o.commit(c.surface);
     gpu.surface_changed(o.patch);
     expect(preview_cpu == cpu_trace(c, all), c.name + ": overlay preview equals the committed surface");
@@ -128,7 +154,7 @@ void gpu_checks(Case& c, cudaStream_t stream) {
     expect(after_gpu.histogram == after_cpu.histogram, c.name + ": GPU histogram after surface_changed");
     expect(same_totals(after_gpu.totals, after_cpu.totals), c.name + ": GPU totals after surface_changed");
     expect(!(after_cpu.histogram == ref.histogram), c.name + ": the move changed the histogram");
-    std::printf("%-43s GPU == CPU (histogram, totals, records, overlay, surface_changed)\n", c.name.c_str());
+    std::printf("%-43s GPU == CPU (histogram, totals, records, overlay, window, surface_changed)\n", c.name.c_str());
 }
 
 // for_each(exec::cuda) itself: every index exactly once for n far beyond one grid, the

@@ -34,6 +34,7 @@
 #include "../trace/heightfield_kernel.hpp"
 #include "../trace/path.hpp"
 #include "../trace/tracer.hpp"
+#include "../trace/window_kernel.hpp"
 #include "exec_cuda.cuh"
 #include "kernels.hpp"
 
@@ -235,6 +236,47 @@ public:
         trace_records(policy, v, ids, records);
     }
 
+    // A window of moves in one launch (trace/window.hpp): pair k is ray ray[k] through
+    // moves[proposal[k]], its record into records[k]. The moves' heights and normals go
+    // up packed, one copy each, then their views, the pairs and one kernel over the pairs.
+    void trace_window(exec::cuda_t policy, std::span<const HeightOverlay> moves, std::span<const std::int32_t> proposal,
+                      std::span<const std::int32_t> ray, std::span<RayRecord> records) const {
+        check_window(moves.size(), proposal, ray, records);
+        if (ray.empty()) return;
+        std::vector<float> heights;
+        std::vector<Vec3> normals;
+        std::vector<std::size_t> at_height, at_normal;
+        for (const HeightOverlay& o : moves) {
+            at_height.push_back(heights.size()), at_normal.push_back(normals.size());
+            heights.insert(heights.end(), o.heights.begin(), o.heights.end());
+            normals.insert(normals.end(), o.normals.begin(), o.normals.end());
+        }
+        overlay_heights_.resize(std::max<std::size_t>(1, heights.size()));
+        overlay_normals_.resize(std::max<std::size_t>(1, normals.size()));
+        if (!heights.empty()) overlay_heights_.upload(std::span<const float>(heights), 0, policy.stream);
+        if (!normals.empty()) overlay_normals_.upload(std::span<const Vec3>(normals), 0, policy.stream);
+        std::vector<OverlayView> views(moves.size());
+        for (std::size_t p = 0; p < moves.size(); ++p) {
+            views[p] = overlay_view(*surface_, moves[p]);
+            static_cast<HeightfieldView&>(views[p]) = device_view();
+            views[p].oh = overlay_heights_.data() + at_height[p];
+            views[p].on = overlay_normals_.data() + at_normal[p];
+        }
+        window_views_.resize(views.size());
+        window_views_.upload(std::span<const OverlayView>(views), 0, policy.stream);
+        window_proposals_.resize(proposal.size());
+        window_proposals_.upload(proposal, 0, policy.stream);
+        ids_.resize(ray.size());
+        ids_.upload(ray, 0, policy.stream);
+        records_.resize(ray.size());
+        policy.synchronize = false;  // the download below waits for the kernel
+        for_each(policy, std::int64_t(ray.size()),
+                 WindowRetraceKernel<OverlayView>{window_views_.data(), params_, origin_.data(), direction_.data(),
+                                                  window_proposals_.data(), ids_.data(), records_.data()});
+        records_.download(records, 0, policy.stream);
+        check(cudaStreamSynchronize(policy.stream), "DeviceHeightfieldTracer::trace_window");
+    }
+
     // The CPU versions: HeightfieldTracer's, on the host copy of the surface.
     template <HostPolicy P>
     void trace_all(P policy, Histogram& out, TraceTotals& totals) const {
@@ -254,7 +296,31 @@ public:
                                                  ids.data(), records.data()});
     }
 
+    template <HostPolicy P>
+    void trace_window(P policy, std::span<const HeightOverlay> moves, std::span<const std::int32_t> proposal,
+                      std::span<const std::int32_t> ray, std::span<RayRecord> records) const {
+        check_window(moves.size(), proposal, ray, records);
+        std::vector<OverlayView> views(moves.size());
+        for (std::size_t p = 0; p < moves.size(); ++p) views[p] = overlay_view(*surface_, moves[p]);
+        for_each(policy, std::int64_t(ray.size()),
+                 WindowRetraceKernel<OverlayView>{views.data(), params_, rays_->origin.data(), rays_->direction.data(),
+                                                  proposal.data(), ray.data(), records.data()});
+    }
+
 private:
+    // As check_ids, and every pair's proposal must be one of the window's moves.
+    void check_window(std::size_t moves, std::span<const std::int32_t> proposal, std::span<const std::int32_t> ray,
+                      std::span<RayRecord> records) const {
+        if (proposal.size() != ray.size())
+            throw InputError("DeviceHeightfieldTracer::trace_window: " + std::to_string(proposal.size()) +
+                             " proposals for " + std::to_string(ray.size()) + " rays");
+        for (const std::int32_t p : proposal)
+            if (p < 0 || std::size_t(p) >= moves)
+                throw InputError("DeviceHeightfieldTracer::trace_window: proposal " + std::to_string(p) +
+                                 " of a window of " + std::to_string(moves) + " moves");
+        check_ids(ray, records);
+    }
+
     void upload_rays() {
         const RaySet& r = *rays_;
         origin_.resize(r.origin.size());
@@ -328,6 +394,8 @@ private:
     mutable DeviceBuffer<RayRecord> records_;
     mutable DeviceBuffer<float> overlay_heights_;
     mutable DeviceBuffer<Vec3> overlay_normals_;
+    mutable DeviceBuffer<OverlayView> window_views_;
+    mutable DeviceBuffer<std::int32_t> window_proposals_;
 };
 
 static_assert(Tracer<DeviceHeightfieldTracer>, "DeviceHeightfieldTracer must satisfy the Tracer concept");
