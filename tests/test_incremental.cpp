@@ -443,6 +443,38 @@ TEST_CASE("a problem built on the trace of the one before it follows a rebuilt o
     }
 }
 
+TEST_CASE("an annealing run whose windows are evaluated together is the per-move run bit for bit") {
+    // The batch logic of a design on a GPU (trace/window.hpp), run by the annealer on the
+    // CPU: speculative windows of 8 moves, their rays retraced by one kernel call.
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        const auto run = [&](bool windows, int speculative, int threads) {
+            Setup s = make_setup(c);
+            SurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+                                   make_bandit(BanditKind::history, 7), 1e-4, 1.0);
+            problem.set_window_evaluation(windows);
+            AnnealOptions o;
+            o.seed = 11;
+            o.max_iterations = 600;
+            o.speculative = speculative;
+            o.threads = threads;
+            o.adaptive_speculation = false;
+            const AnnealResult r = anneal(problem, o);
+            CHECK(problem.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+            return std::make_pair(r, s.hm.heights());
+        };
+        const auto serial = run(false, 1, 1);
+        CHECK(serial.first.accepted > 20);
+        for (const int threads : {1, 2}) {
+            const auto windows = run(true, 8, threads);
+            CHECK(windows.first.accepted == serial.first.accepted);
+            CHECK(windows.first.final_energy == serial.first.final_energy);
+            CHECK(windows.second == serial.second);
+            CHECK(windows.first.proposals_evaluated > windows.first.iterations);  // windows really ran
+        }
+    }
+}
+
 #if defined(FREEFORM_WITH_EMBREE)
 TEST_CASE("an Embree problem annealed with speculative windows on 2 threads follows the serial run") {
     // The Embree backend shows each move to its acceleration structure to evaluate it, so

@@ -134,6 +134,20 @@ void incremental(benchmark::State& state) {
     state.counters["rays"] = double(b.rays.size());
 }
 
+// The batch logic of a design on a GPU (trace/window.hpp), on the CPU: every window of
+// `speculative` moves handed to delta_window, its rays retraced by one kernel call on
+// `threads` OpenMP threads, the accepted move retraced again to commit it. The same
+// trajectory as `incremental` with the same arguments.
+void window_evaluation(benchmark::State& state) {
+    const int mesh = int(state.range(0)), resolution = int(state.range(1)), support = int(state.range(2));
+    const int speculative = int(state.range(3)), threads = int(state.range(4));
+    Bench b(mesh, resolution);
+    SurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, b.proposals(support),
+                           make_bandit(BanditKind::uniform, 7), b.unit(), 1.0);
+    problem.set_window_evaluation(true);
+    run_annealer(state, problem, speculative, threads, 2000);
+}
+
 // The reference's loop: every move retraces every ray (with the height-field tracer, or
 // with Embree after a refit of the tiles the move touched).
 template <class Tracer>
@@ -223,8 +237,28 @@ void sizes(benchmark::internal::Benchmark* b, bool parallel) {
     for (int support : {3, 9, 17}) b->Args({101, 100, support, 1, 1});
 }
 
+// Windows of 8 and 32 moves on two threads, for window_evaluation and for incremental's
+// speculative windows (the per-move evaluation) side by side.
+void windows(benchmark::internal::Benchmark* b) {
+    for (int mesh : {101, 201})
+        for (int window : {8, 32}) b->Args({mesh, 200, 5, window, 2});
+}
+
 }  // namespace
 
+BENCHMARK(window_evaluation)
+    ->Apply(windows)
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(incremental)
+    ->Apply(windows)
+    ->Name("incremental_windows")
+    ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(incremental)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, true); })
     ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})

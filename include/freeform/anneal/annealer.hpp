@@ -91,6 +91,7 @@
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -571,6 +572,18 @@ private:
     void evaluate(int count) {
         const Problem& cp = problem_;
         proposals_evaluated_ += count;
+        // A problem that evaluates a window's moves together (design/problem.hpp,
+        // trace/window.hpp) gets them all at once: the same deltas bit for bit.
+        if constexpr (requires(std::span<typename Problem::Move> m, std::span<double> d) {
+                          cp.delta_window(m, d);
+                          { cp.window_evaluation() } -> std::convertible_to<bool>;
+                      }) {
+            if (count > 1 && cp.window_evaluation()) {
+                cp.delta_window(std::span(moves_).first(std::size_t(count)),
+                                std::span(deltas_).first(std::size_t(count)));
+                return;
+            }
+        }
         if (count == 1 && options_.threads != 1) {
             // One proposal: a problem that can split its evaluation over threads gets them.
             if constexpr (requires(typename Problem::Move& m, TaskPool* pool) { cp.delta(m, pool); }) {

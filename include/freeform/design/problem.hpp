@@ -11,7 +11,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "../core/rng.hpp"
@@ -20,6 +22,7 @@
 #include "../propose/kernel.hpp"
 #include "../propose/single_vertex.hpp"
 #include "../trace/incremental.hpp"
+#include "../trace/window.hpp"
 
 namespace freeform {
 
@@ -87,6 +90,9 @@ public:
         int arm = -1;
         bool noop = false;
         double delta_value = 0;
+        // Evaluated in a window (delta_window): `change` holds the histogram change, weights
+        // and counts but not the records and cells, which accept() retraces first.
+        bool from_window = false;
     };
 
     // `metres_per_cell_shift`: the height amplitude that moves the light by one receiver
@@ -169,6 +175,7 @@ public:
     // backend can (the result is the same bit for bit); the annealer passes its pool
     // when it judges one proposal at a time.
     double delta(Move& m, TaskPool* pool) const {
+        m.from_window = false;
         if (m.noop) {
             m.sums = image_.sums();
             m.penalty_sum = penalty_sum_;
@@ -178,11 +185,41 @@ public:
             backend_.evaluate(trace_, m.overlay, m.change, pool);
         else
             backend_.evaluate(trace_, m.overlay, m.change);
-        m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
-        m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
-        const ObjectiveValue after =
-            combine(m.sums, image_.target().total, Penalties::value(m.penalty_sum, *surface_), weights_);
-        return m.delta_value = after.total - value_.total;
+        return judge(m);
+    }
+
+    // Window evaluation (trace/window.hpp), the batch logic of a design on a GPU, here on
+    // the CPU: the annealer's speculative windows hand their moves to delta_window instead
+    // of delta() one by one. The deltas, and so the design, are the same bit for bit
+    // (tests/test_incremental.cpp). Off by default: on the CPU it is slower (the accepted
+    // move is retraced again to commit it). Only the height-field backend has it.
+    void set_window_evaluation(bool on) { window_evaluation_ = on && std::is_same_v<Backend, HeightfieldBackend>; }
+    bool window_evaluation() const { return window_evaluation_; }
+
+    // The deltas of a window's moves, evaluated together: out[k] = delta(moves[k]).
+    void delta_window(std::span<Move> moves, std::span<double> out) const
+        requires std::is_same_v<Backend, HeightfieldBackend>
+    {
+        window_moves_.clear();
+        for (const Move& m : moves)
+            if (!m.noop) window_moves_.push_back(m.overlay);
+        window_.evaluate(exec::omp_t{backend_.threads}, trace_, window_moves_);
+        const std::int64_t cells = std::int64_t(image_.width()) * image_.height();
+        std::size_t p = 0;
+        for (std::size_t k = 0; k < moves.size(); ++k) {
+            Move& m = moves[k];
+            if (m.noop) {
+                out[k] = delta(m);
+                continue;
+            }
+            const WindowChange& w = window_.change(p++);
+            m.change.reset(rays_->size(), cells);
+            for (std::size_t c = 0; c < w.cells.size(); ++c) m.change.histogram.add(w.cells[c], w.values[c]);
+            m.change.status_delta = w.status_delta;
+            m.change.rays_moved = w.rays_moved;
+            m.from_window = true;
+            out[k] = judge(m);
+        }
     }
 
     void accept(Move& m) { accept(m, nullptr); }
@@ -196,6 +233,12 @@ public:
         if (best_is_current_ && m.delta_value > 0) {
             best_heights_ = surface_->heights();
             best_is_current_ = false;
+        }
+        if constexpr (std::is_same_v<Backend, HeightfieldBackend>) {
+            if (m.from_window) {  // its records and cells: the same change, retraced in full
+                backend_.evaluate(trace_, m.overlay, m.change, pool);
+                m.from_window = false;
+            }
         }
         m.overlay.commit(*surface_);
         backend_.committed(m.overlay.patch);
@@ -303,6 +346,16 @@ private:
         cj = row0_ + int(rng.below(std::uint64_t(row1_ - row0_)));
     }
 
+    // The rest of delta() once m.change holds the move's histogram change: the image sums
+    // and penalties after the move, and the objective's change.
+    double judge(Move& m) const {
+        m.sums = image_.evaluate(m.change.histogram, m.image_scratch);
+        m.penalty_sum = penalty_sum_ + penalties_->delta(*surface_, m.overlay);
+        const ObjectiveValue after =
+            combine(m.sums, image_.target().total, Penalties::value(m.penalty_sum, *surface_), weights_);
+        return m.delta_value = after.total - value_.total;
+    }
+
     double cell_error(const RayRecord& r) const {
         const int x = std::min(int(r.px), image_.width() - 1), y = std::min(int(r.py), image_.height() - 1);
         return double(std::llabs(image_.difference(std::size_t(y) * image_.width() + x)));
@@ -336,6 +389,9 @@ private:
     std::vector<float> best_heights_;
     double max_error_ = 0;
     int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
+    bool window_evaluation_ = false;
+    mutable WindowEvaluation window_;                  // scratch of delta_window
+    mutable std::vector<HeightOverlay> window_moves_;  // its moves that change something
 };
 
 using SurfaceProblem = BasicSurfaceProblem<HeightfieldBackend>;
