@@ -409,6 +409,18 @@ void same_moves(std::uint64_t seed, int steps, Problems&... problems) {
     }
 }
 
+// A seeded run of `iterations` with speculative windows of `speculative` moves always on
+// (not adapted to the measured speed), on `threads` threads.
+AnnealOptions fixed_windows(std::int64_t iterations, int speculative, int threads) {
+    AnnealOptions o;
+    o.seed = 11;
+    o.max_iterations = iterations;
+    o.speculative = speculative;
+    o.threads = threads;
+    o.adaptive_speculation = false;
+    return o;
+}
+
 }  // namespace
 
 TEST_CASE("a problem built on the trace of the one before it follows a rebuilt one move for move") {
@@ -453,13 +465,7 @@ TEST_CASE("an annealing run whose windows are evaluated together is the per-move
             SurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                    make_bandit(BanditKind::history, 7), 1e-4, 1.0);
             problem.set_window_evaluation(windows);
-            AnnealOptions o;
-            o.seed = 11;
-            o.max_iterations = 600;
-            o.speculative = speculative;
-            o.threads = threads;
-            o.adaptive_speculation = false;
-            const AnnealResult r = anneal(problem, o);
+            const AnnealResult r = anneal(problem, fixed_windows(600, speculative, threads));
             CHECK(problem.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
             return std::make_pair(r, s.hm.heights());
         };
@@ -487,13 +493,7 @@ TEST_CASE("an Embree problem annealed with speculative windows on 2 threads foll
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
         EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                        make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
-        AnnealOptions o;
-        o.seed = 11;
-        o.max_iterations = 400;
-        o.speculative = speculative;
-        o.threads = threads;
-        o.adaptive_speculation = false;
-        const AnnealResult r = anneal(problem, o);
+        const AnnealResult r = anneal(problem, fixed_windows(400, speculative, threads));
         return std::make_pair(r, s.hm.heights());
     };
     const auto serial = run(1, 1), speculative = run(4, 2);
