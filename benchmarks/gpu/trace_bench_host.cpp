@@ -143,7 +143,7 @@ WindowTiming time_window_cpu(const BenchCase& c, int repeats) {
         w.retrace(exec::omp_t{2}, trace, c.window);
         retrace.push_back(seconds_since(t0));
         t0 = clock::now();
-        w.sum(trace);
+        w.sum(exec::omp_t{2}, trace);
         sum.push_back(seconds_since(t0));
     }
     t.same_changes = true;

@@ -528,10 +528,6 @@ public:
     // (trace/window.hpp) starts from the same selection.
     bool select_move_rays(const HeightOverlay& o, TraceChange& change) const { return select_rays(o, change); }
 
-    // Moves ray `id`'s weight into `out` if `now` differs from its maintained record, as
-    // evaluate() does for each ray it retraces.
-    void account_record(std::int32_t id, const RayRecord& now, TracePart& out) const { account(id, now, out); }
-
     // Retraces every ray against the surface with `o` applied: the reference's full
     // evaluation, with the same result as evaluate() (for comparisons and benchmarks).
     void evaluate_all(const HeightOverlay& o, TraceChange& change, TaskPool* pool = nullptr) const {

@@ -10,17 +10,17 @@
 // exactly as evaluate() selects them. One kernel call (for_each over the pairs: a thread
 // per pair on the device) retraces every pair's ray through its own proposal's overlay.
 // Each proposal's change of the histogram and of the weight per status is then summed
-// from its pairs' old and new records (WindowChange). Those sums are of fixed-point integers (core/
-// fixed_point.hpp), so their order does not matter: the change equals evaluate()'s bit
-// for bit whatever the policy or thread count (tests/test_incremental.cpp), and the
-// image terms, integer sums too (objective/image_terms.hpp), give every proposal the
-// same objective. Here the summing runs on the host, pair by pair; on the device it
-// becomes fixed-point atomics into each proposal's cells.
+// from its pairs' old and new records (WindowChange). Those sums are of fixed-point
+// integers (core/fixed_point.hpp), so their order does not matter: the change equals
+// evaluate()'s bit for bit whatever the policy or thread count (tests/
+// test_incremental.cpp), and the image terms, integer sums too (objective/
+// image_terms.hpp), give every proposal the same objective.
 //
-// What this does not do yet: the cells each ray crosses are not collected (a proposal
-// that is accepted is evaluated again by evaluate(), whose change commit() needs), and
-// the overlays' heights and normals are read from host memory (a device window copies
-// them first).
+// What this does not do yet: the selection and the adding up of each proposal's pairs
+// run on the host (on the device they would be the ray/cell index's lookups and
+// fixed-point atomics into each proposal's cells, docs/cuda.md), and the cells each ray crosses are not collected (a
+// proposal that is accepted is evaluated again by evaluate(), whose change commit()
+// needs). DeviceHeightfieldTracer::trace_window retraces the pairs on the GPU.
 #include <array>
 #include <cstdint>
 #include <span>
@@ -55,7 +55,7 @@ public:
     void evaluate(P policy, const IncrementalTrace& trace, std::span<const HeightOverlay> moves) {
         select(trace, moves);
         retrace(policy, trace, moves);
-        sum(trace);
+        sum(policy, trace);
     }
 
     // Lists the (proposal, ray) pairs of `moves`, proposal by proposal: each move's rays as
@@ -87,15 +87,30 @@ public:
                                              proposal_.data(), ray_.data(), records_.data()});
     }
 
-    // Adds each proposal's change up from its pairs' records (exact integer sums), as
-    // evaluate() accounts its rays, into change(p).
-    void sum(const IncrementalTrace& trace) {
+    // Adds each proposal's change up from its pairs' records, as evaluate() accounts its
+    // rays, into change(p): a kernel over the pairs works out each ray's change
+    // (WindowAccountKernel), then each proposal's are added up in exact integers.
+    template <HostPolicy P>
+    void sum(P policy, const IncrementalTrace& trace) {
+        pair_changes_.resize(ray_.size());
+        for_each(policy, std::int64_t(ray_.size()),
+                 WindowAccountKernel{trace.params().receiver, ray_.data(), records_.data(), trace.records().data(),
+                                     trace.rays().weight.data(), pair_changes_.data()});
         const std::int64_t cells = std::int64_t(trace.receiver_width()) * trace.receiver_height();
         for (std::size_t p = 0; p + 1 < begin_.size(); ++p) {
             scratch_.reset(trace.rays().size(), cells);
-            for (std::size_t k = begin_[p]; k < begin_[p + 1]; ++k)
-                trace.account_record(ray_[k], records_[k], scratch_);
             WindowChange& c = changes_[p];
+            c.status_delta.fill(0);
+            c.rays_moved = 0;
+            for (std::size_t k = begin_[p]; k < begin_[p + 1]; ++k) {
+                const PairChange& pc = pair_changes_[k];
+                if (!pc.moved) continue;
+                ++c.rays_moved;
+                account_weight(c.status_delta, pc.status_before, pc.weight, pc.before, -1);
+                account_weight(c.status_delta, pc.status_now, pc.weight, pc.now);
+                for (int j = 0; j < 8; ++j)
+                    if (pc.amount[j] != 0) scratch_.histogram.add(pc.cell[j], pc.amount[j]);
+            }
             c.cells.clear();
             c.values.clear();
             for (const std::int32_t cell : scratch_.histogram.touched) {  // a cell may be listed twice: take it once
@@ -104,8 +119,6 @@ public:
                 v = 0;
             }
             scratch_.histogram.touched.clear();
-            c.status_delta = scratch_.status_delta;
-            c.rays_moved = scratch_.rays_moved;
         }
     }
 
@@ -127,6 +140,7 @@ private:
     std::vector<std::int32_t> proposal_, ray_;
     std::vector<std::size_t> begin_;  // proposal p's pairs: [begin_[p], begin_[p + 1])
     std::vector<RayRecord> records_;
+    std::vector<PairChange> pair_changes_;  // per pair, after sum()'s kernel
 };
 
 }  // namespace freeform
