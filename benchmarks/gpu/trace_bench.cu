@@ -10,8 +10,8 @@
 // window of 64 such moves (trace/window.hpp): one by one on the CPU as the annealer
 // evaluates them, together on 2 CPU threads, and their rays retraced in one GPU launch.
 // The GPU's histogram, the move's records and the window's records must equal the CPU's
-// bit for bit. Writes one JSON
-// object per scene into OUT.json and a table on standard output.
+// bit for bit. Writes one JSON object per scene into OUT.json and a table on standard
+// output.
 //
 // Exit status: 0 done, 1 a mismatch or an error, 2 bad arguments. Without a CUDA device
 // the CPU figures are still written, with "gpu": null.

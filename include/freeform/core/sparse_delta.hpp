@@ -31,6 +31,17 @@ struct SparseDelta {
         for (auto c : touched) value[std::size_t(c)] = 0;
         touched.clear();
     }
+    // Calls f(cell, value) once for every cell whose value is not zero, in the order the
+    // cells were first touched (a cell listed twice is taken once), and empties the delta.
+    template <class F>
+    void drain(F&& f) {
+        for (auto c : touched) {
+            Fixed& v = value[std::size_t(c)];
+            if (v != 0) f(c, v);
+            v = 0;
+        }
+        touched.clear();
+    }
 };
 
 }  // namespace freeform

@@ -255,9 +255,9 @@ public:
         overlay_normals_.resize(std::max<std::size_t>(1, normals.size()));
         if (!heights.empty()) overlay_heights_.upload(std::span<const float>(heights), 0, policy.stream);
         if (!normals.empty()) overlay_normals_.upload(std::span<const Vec3>(normals), 0, policy.stream);
-        std::vector<OverlayView> views(moves.size());
+        std::vector<OverlayView> views;
+        overlay_views(*surface_, moves, views);
         for (std::size_t p = 0; p < moves.size(); ++p) {
-            views[p] = overlay_view(*surface_, moves[p]);
             static_cast<HeightfieldView&>(views[p]) = device_view();
             views[p].oh = overlay_heights_.data() + at_height[p];
             views[p].on = overlay_normals_.data() + at_normal[p];
@@ -300,8 +300,8 @@ public:
     void trace_window(P policy, std::span<const HeightOverlay> moves, std::span<const std::int32_t> proposal,
                       std::span<const std::int32_t> ray, std::span<RayRecord> records) const {
         check_window(moves.size(), proposal, ray, records);
-        std::vector<OverlayView> views(moves.size());
-        for (std::size_t p = 0; p < moves.size(); ++p) views[p] = overlay_view(*surface_, moves[p]);
+        std::vector<OverlayView> views;
+        overlay_views(*surface_, moves, views);
         for_each(policy, std::int64_t(ray.size()),
                  WindowRetraceKernel<OverlayView>{views.data(), params_, rays_->origin.data(), rays_->direction.data(),
                                                   proposal.data(), ray.data(), records.data()});

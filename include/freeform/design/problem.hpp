@@ -200,10 +200,15 @@ public:
     void delta_window(std::span<Move> moves, std::span<double> out) const
         requires std::is_same_v<Backend, HeightfieldBackend>
     {
-        window_moves_.clear();
-        for (const Move& m : moves)
-            if (!m.noop) window_moves_.push_back(m.overlay);
-        window_.evaluate(exec::omp_t{backend_.threads}, trace_, window_moves_);
+        // Copied into overlays kept from window to window: assignment reuses their memory.
+        std::size_t n = 0;
+        for (const Move& m : moves) {
+            if (m.noop) continue;
+            if (n == window_moves_.size()) window_moves_.emplace_back();
+            window_moves_[n++] = m.overlay;
+        }
+        const std::span<const HeightOverlay> changing(window_moves_.data(), n);
+        window_.evaluate(exec::omp_t{backend_.threads}, trace_, changing);
         const std::int64_t cells = std::int64_t(image_.width()) * image_.height();
         std::size_t p = 0;
         for (std::size_t k = 0; k < moves.size(); ++k) {

@@ -602,12 +602,7 @@ private:
     // Adds part `other`'s histogram change, weights per status and counts to `into`
     // (emptying other's histogram).
     static void add_totals(TracePart& into, TracePart& other) {
-        for (auto c : other.histogram.touched) {  // a cell may be listed twice: take it once
-            Fixed& v = other.histogram.value[std::size_t(c)];
-            if (v != 0) into.histogram.add(c, v);
-            v = 0;
-        }
-        other.histogram.touched.clear();
+        other.histogram.drain([&](std::int32_t c, Fixed v) { into.histogram.add(c, v); });
         for (std::size_t st = 0; st < into.status_delta.size(); ++st) into.status_delta[st] += other.status_delta[st];
         into.rays_moved += other.rays_moved;
         into.rays_culled += other.rays_culled;

@@ -18,9 +18,10 @@
 //
 // What this does not do yet: the selection and the adding up of each proposal's pairs
 // run on the host (on the device they would be the ray/cell index's lookups and
-// fixed-point atomics into each proposal's cells, docs/cuda.md), and the cells each ray crosses are not collected (a
-// proposal that is accepted is evaluated again by evaluate(), whose change commit()
-// needs). DeviceHeightfieldTracer::trace_window retraces the pairs on the GPU.
+// fixed-point atomics into each proposal's cells, docs/cuda.md), and the cells each ray
+// crosses are not collected (a proposal that is accepted is evaluated again by
+// evaluate(), whose change commit() needs). DeviceHeightfieldTracer::trace_window
+// retraces the pairs on the GPU.
 #include <array>
 #include <cstdint>
 #include <span>
@@ -47,7 +48,7 @@ struct WindowChange {
 // steps, so that the middle one can run elsewhere (DeviceHeightfieldTracer::trace_window
 // retraces the same pairs on the GPU): select() lists the pairs, retrace() fills their
 // records, sum() adds each proposal's change up. Its scratch is one selection's (the
-// ray marks, a receiver-sized delta) whatever the window's size.
+// ray marks) and one receiver-sized delta, whatever the window's size.
 class WindowEvaluation {
 public:
     // All three steps on the host. Nothing changes in `trace`.
@@ -78,8 +79,7 @@ public:
     // the pairs, the kernel a device runs.
     template <HostPolicy P>
     void retrace(P policy, const IncrementalTrace& trace, std::span<const HeightOverlay> moves) {
-        views_.resize(moves.size());
-        for (std::size_t p = 0; p < moves.size(); ++p) views_[p] = overlay_view(trace.surface(), moves[p]);
+        overlay_views(trace.surface(), moves, views_);
         const RaySet& rays = trace.rays();
         for_each(
             policy, std::int64_t(ray_.size()),
@@ -96,9 +96,9 @@ public:
         for_each(policy, std::int64_t(ray_.size()),
                  WindowAccountKernel{trace.params().receiver, ray_.data(), records_.data(), trace.records().data(),
                                      trace.rays().weight.data(), pair_changes_.data()});
-        const std::int64_t cells = std::int64_t(trace.receiver_width()) * trace.receiver_height();
+        const auto cells = std::size_t(trace.receiver_width()) * std::size_t(trace.receiver_height());
+        if (delta_.value.size() != cells) delta_.resize(cells);
         for (std::size_t p = 0; p + 1 < begin_.size(); ++p) {
-            scratch_.reset(trace.rays().size(), cells);
             WindowChange& c = changes_[p];
             c.status_delta.fill(0);
             c.rays_moved = 0;
@@ -109,16 +109,11 @@ public:
                 account_weight(c.status_delta, pc.status_before, pc.weight, pc.before, -1);
                 account_weight(c.status_delta, pc.status_now, pc.weight, pc.now);
                 for (int j = 0; j < 8; ++j)
-                    if (pc.amount[j] != 0) scratch_.histogram.add(pc.cell[j], pc.amount[j]);
+                    if (pc.amount[j] != 0) delta_.add(pc.cell[j], pc.amount[j]);
             }
             c.cells.clear();
             c.values.clear();
-            for (const std::int32_t cell : scratch_.histogram.touched) {  // a cell may be listed twice: take it once
-                Fixed& v = scratch_.histogram.value[std::size_t(cell)];
-                if (v != 0) c.cells.push_back(cell), c.values.push_back(v);
-                v = 0;
-            }
-            scratch_.histogram.touched.clear();
+            delta_.drain([&](std::int32_t cell, Fixed v) { c.cells.push_back(cell), c.values.push_back(v); });
         }
     }
 
@@ -134,7 +129,8 @@ public:
     std::span<RayRecord> records() { return records_; }                    // per pair, after retrace()
 
 private:
-    TraceChange scratch_;  // one proposal's selection, then one proposal's sums
+    TraceChange scratch_;  // one proposal's selection
+    SparseDelta delta_;    // one proposal's histogram change, drained into its WindowChange
     std::vector<WindowChange> changes_;
     std::vector<OverlayView> views_;
     std::vector<std::int32_t> proposal_, ray_;

@@ -3,6 +3,8 @@
 // proposal, retraced through that proposal's overlay. In its own header, which the CUDA
 // tracer (cuda/trace_cuda.cuh) includes as well, so that the device runs this very code.
 #include <cstdint>
+#include <span>
+#include <vector>
 
 #include "../core/hd.hpp"
 #include "../surface/overlay.hpp"
@@ -10,6 +12,12 @@
 #include "path.hpp"
 
 namespace freeform {
+
+// The kernels' views of a window's moves over `base` (host memory), one per move.
+inline void overlay_views(const Heightmap& base, std::span<const HeightOverlay> moves, std::vector<OverlayView>& out) {
+    out.resize(moves.size());
+    for (std::size_t p = 0; p < moves.size(); ++p) out[p] = overlay_view(base, moves[p]);
+}
 
 // Pair k's ray, retraced through its proposal's view: records[k]. The same functor runs
 // under every execution policy (it reads only the arrays it is given).
