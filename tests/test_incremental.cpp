@@ -9,6 +9,7 @@
 #include <freeform/anneal/annealer.hpp>
 #include <freeform/design/problem.hpp>
 #include <freeform/trace/incremental.hpp>
+#include <freeform/trace/index_kernel.hpp>
 #include <freeform/trace/window.hpp>
 #if defined(FREEFORM_WITH_EMBREE)
 #include <freeform/design/embree_incremental.hpp>
@@ -293,6 +294,177 @@ TEST_CASE("a window of moves evaluated together gives each move evaluate()'s cha
         CHECK(pairs > 1000);
         // After the commits the maintained trace is still a full retrace's.
         CHECK(inc.histogram() == trace_scene(c.scene, hm, rays).histogram);
+    }
+}
+
+namespace {
+
+// Whether two windows hold the same pairs in the same order and give each proposal the
+// same change (cells compared as sets: the host lists them as first touched, the kernels
+// in increasing order).
+bool same_window(const WindowEvaluation& a, const WindowEvaluation& b) {
+    if (a.size() != b.size() || !std::ranges::equal(a.proposals(), b.proposals()) ||
+        !std::ranges::equal(a.rays(), b.rays()))
+        return false;
+    const auto sorted = [](const WindowChange& c) {
+        std::vector<std::pair<std::int32_t, Fixed>> v;
+        for (std::size_t k = 0; k < c.cells.size(); ++k) v.emplace_back(c.cells[k], c.values[k]);
+        std::sort(v.begin(), v.end());
+        return v;
+    };
+    for (std::size_t p = 0; p < a.size(); ++p) {
+        const WindowChange &x = a.change(p), &y = b.change(p);
+        if (sorted(x) != sorted(y) || x.status_delta != y.status_delta || x.rays_moved != y.rays_moved) return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+TEST_CASE("a window's kernel forms, selection from a flat index and atomic sums, give the host forms' pairs and "
+          "changes") {
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        auto [hm, rays, pp] = rippled(c);
+        IncrementalTrace inc(hm, rays, pp);
+        inc.rebuild(exec::seq);
+        CounterRng rng(11, 0);
+        std::vector<HeightOverlay> window(8);
+        WindowEvaluation host, serial, threaded;
+        FlatRayCellIndex flat;
+        TraceChange single;
+        int differ = 0, committed = 0;
+        std::int64_t pairs = 0;
+        for (int w = 0; w < 40; ++w) {
+            for (HeightOverlay& o : window) random_bump(hm, rng, o);
+            window[3] = HeightOverlay{};  // a proposal that changes nothing, among the others
+            flatten(inc, flat);
+            host.evaluate(exec::seq, inc, window);
+            serial.select_flat(exec::seq, inc, flat.view(), window);
+            serial.retrace(exec::seq, inc, window);
+            serial.sum_atomic(exec::seq, inc);
+            threaded.select_flat(exec::omp_t{2}, inc, flat.view(), window);
+            threaded.retrace(exec::omp_t{2}, inc, window);
+            threaded.sum_atomic(exec::omp_t{2}, inc);
+            differ += same_window(host, serial) && same_window(host, threaded) ? 0 : 1;
+            pairs += std::int64_t(host.pairs());
+            // The first proposal that moves light is accepted: the index changes.
+            for (std::size_t p = 0; p < window.size(); ++p)
+                if (host.change(p).rays_moved > 0) {
+                    inc.evaluate(window[p], single);
+                    window[p].commit(hm);
+                    inc.commit(single);
+                    ++committed;
+                    break;
+                }
+        }
+        CHECK(differ == 0);
+        CHECK(committed > 20);
+        CHECK(pairs > 1000);
+    }
+}
+
+namespace {
+
+// Whether a slotted index holds the incremental trace's index: each cell's rays (as a
+// set: the slotted lists are sorted), each ray's crossings.
+bool same_index(const SlottedRayCellIndex& s, const IncrementalTrace& inc) {
+    const RayCellIndex& index = inc.index();
+    for (std::int32_t c = 0; c < std::int32_t(index.cell_count()); ++c) {
+        std::vector<std::int32_t> host = index.rays_of(c);
+        std::sort(host.begin(), host.end());
+        const auto first = s.cell_rays.begin() + s.cell_begin[std::size_t(c)];
+        if (!std::equal(host.begin(), host.end(), first, first + s.cell_count[std::size_t(c)])) return false;
+    }
+    for (std::int32_t r = 0; r < std::int32_t(index.ray_count()); ++r) {
+        const auto host = index.cells_of(r);
+        const auto first = s.crossings.begin() + s.ray_begin[std::size_t(r)];
+        if (std::int64_t(host.size()) != s.ray_count[std::size_t(r)] ||
+            !std::equal(host.begin(), host.end(), first, [](const CellCrossing& a, const CellCrossing& b) {
+                return a.cell == b.cell && a.zlo == b.zlo && a.zhi == b.zhi;
+            }))
+            return false;
+    }
+    return true;
+}
+
+// Whether two windows select the same rays for every proposal (in any order) and give it
+// the same change.
+bool same_sets(const WindowEvaluation& a, const WindowEvaluation& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t p = 0; p < a.size(); ++p) {
+        std::vector<std::int32_t> x(a.rays_of(p).begin(), a.rays_of(p).end()), y(b.rays_of(p).begin(), b.rays_of(p).end());
+        std::sort(x.begin(), x.end()), std::sort(y.begin(), y.end());
+        const WindowChange &u = a.change(p), &v = b.change(p);
+        if (x != y || u.cells != v.cells || u.values != v.values || u.status_delta != v.status_delta ||
+            u.rays_moved != v.rays_moved)
+            return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+TEST_CASE("a slotted index committed by the kernels stays the incremental trace's, and windows select from it") {
+    for (const Case& c : cases()) {
+        CAPTURE(c.name);
+        auto [hm, rays, pp] = rippled(c);
+        IncrementalTrace inc(hm, rays, pp);
+        inc.rebuild(exec::seq);
+        FlatRayCellIndex flat;
+        flatten(inc, flat);
+        SlottedRayCellIndex serial, threaded;
+        serial.assign(flat), threaded.assign(flat);
+        std::vector<RayRecord> serial_records = inc.records(), threaded_records = inc.records();
+        CounterRng rng(13, 0);
+        std::vector<HeightOverlay> window(8);
+        WindowEvaluation reference, selected;
+        TraceChange single;
+        int differ = 0, committed = 0, relisted = 0, overflowed = 0;
+        for (int w = 0; w < 40; ++w) {
+            for (HeightOverlay& o : window) random_bump(hm, rng, o);
+            flatten(inc, flat);
+            reference.select_flat(exec::seq, inc, flat.view(), window);
+            reference.retrace(exec::seq, inc, window);
+            reference.sum_atomic(exec::seq, inc);
+            selected.select_flat(exec::omp_t{2}, inc, threaded.view().selection(), window);
+            selected.retrace(exec::omp_t{2}, inc, window);
+            selected.sum_atomic(exec::omp_t{2}, inc);
+            differ += same_sets(reference, selected) ? 0 : 1;
+            for (std::size_t p = 0; p < window.size(); ++p) {
+                if (reference.change(p).rays_moved == 0) continue;
+                inc.evaluate(window[p], single);
+                for (std::size_t k = 0; k < single.rays.size(); ++k)
+                    relisted += std::ranges::equal(inc.index().cells_of(single.rays[k]),
+                                                   std::span(single.cells).subspan(std::size_t(single.cell_begin[k]),
+                                                                                   std::size_t(single.cell_begin[k + 1] -
+                                                                                               single.cell_begin[k])),
+                                                   {}, &CellCrossing::cell, &CellCrossing::cell)
+                                    ? 0
+                                    : 1;
+                window[p].commit(hm);
+                inc.commit(single);
+                const IndexChangeView change{single.rays.data(), single.records.data(), single.cell_begin.data(),
+                                             single.cells.data()};
+                const bool fits = serial.commit(exec::seq, change, std::int64_t(single.rays.size()), serial_records.data());
+                CHECK(threaded.commit(exec::omp_t{2}, change, std::int64_t(single.rays.size()),
+                                      threaded_records.data()) == fits);
+                if (!fits) {  // a slot overflowed: the index is assigned again, with room to spare
+                    ++overflowed;
+                    flatten(inc, flat);
+                    serial.assign(flat), threaded.assign(flat);
+                }
+                differ += same_index(serial, inc) && same_index(threaded, inc) ? 0 : 1;
+                differ += serial_records == inc.records() && threaded_records == inc.records() ? 0 : 1;
+                ++committed;
+                break;
+            }
+        }
+        CHECK(differ == 0);
+        CHECK(committed > 20);
+        CHECK(relisted > 20);  // the commits moved rays between cell lists, not only ranges
+        MESSAGE(std::string(c.name), ": ", overflowed, " of ", committed, " commits ran a pool out of room");
+        CHECK(overflowed * 4 < committed);
     }
 }
 

@@ -8,7 +8,8 @@
 // every CPU thread here, and on the GPU; and one move's retrace (the rays over a 5 × 5
 // vertex patch, through the move's overlay), which the annealer does per proposal; and a
 // window of 64 such moves (trace/window.hpp): one by one on the CPU as the annealer
-// evaluates them, together on 2 CPU threads, and their rays retraced in one GPU launch.
+// evaluates them, together on 2 CPU threads, their rays retraced in one GPU launch, and
+// the whole window (selection, retrace, sums) on the GPU.
 // The GPU's histogram, the move's records and the window's records must equal the CPU's
 // bit for bit. Writes one JSON object per scene into OUT.json and a table on standard
 // output.
@@ -40,7 +41,36 @@ double since(clock_type::time_point t0) { return std::chrono::duration<double>(c
 struct GpuTiming {
     double full_seconds = 0, move_seconds = 0, upload_seconds = 0, window_seconds = 0;
     bool same_histogram = false, same_move = false, same_window = false;
+    // The whole window on the device (cuda::DeviceWindowEvaluation): selection to sums,
+    // and the copy of the state it reads (the index and the records, after a commit).
+    double device_window_seconds = 0, state_seconds = 0;
+    bool same_device_window = false;
 };
+
+// The whole window on the device, timed, its pairs and changes compared with the host's.
+void time_device_window(const BenchCase& c, const cuda::DeviceHeightfieldTracer& gpu, const WindowTiming& window,
+                        int repeats, GpuTiming& g) {
+    cuda::DeviceWindowEvaluation dw;
+    std::vector<double> state, windows;
+    for (int r = 0; r < std::max(repeats, 20); ++r) {
+        const auto t1 = clock_type::now();
+        dw.upload_state(window.index.view(), window.index.cells(), window.index.rays(), window.maintained);
+        state.push_back(since(t1));
+        const auto t2 = clock_type::now();
+        dw.evaluate(exec::cuda, gpu, c.window, window.patches, window.slot_proposal, window.pad);
+        windows.push_back(since(t2));
+    }
+    std::vector<std::int32_t> proposals, rays;
+    dw.download_pairs(proposals, rays);
+    g.same_device_window = proposals == window.proposals && rays == window.rays && dw.size() == window.changes.size();
+    for (std::size_t p = 0; g.same_device_window && p < dw.size(); ++p) {
+        const WindowChange &a = dw.change(p), &b = window.changes[p];
+        g.same_device_window = a.cells == b.cells && a.values == b.values && a.status_delta == b.status_delta &&
+                               a.rays_moved == b.rays_moved;
+    }
+    g.device_window_seconds = median(windows);
+    g.state_seconds = median(state);
+}
 
 GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, const WindowTiming& window, int repeats) {
     GpuTiming g;
@@ -78,6 +108,7 @@ GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, const WindowTiming&
     }
     g.same_window = window_records == window.records;
     g.window_seconds = median(windows);
+    time_device_window(c, gpu, window, repeats, g);
     g.full_seconds = median(full);
     g.move_seconds = median(move);
     return g;
@@ -151,7 +182,11 @@ int main(int argc, char** argv) try {
             "(2 threads: select %.2f ms, retrace %.2f ms, sum %.2f ms); changes %s\n",
             moves, win.rays.size(), moves / win.per_move_seconds, moves / win.window_seconds, 1e3 * win.select_seconds,
             1e3 * win.retrace_seconds, 1e3 * win.sum_seconds, win.same_changes ? "equal" : "DIFFER");
-        failures += !win.same_changes;
+        std::printf("  kernel forms on 2 threads: select from the flat index %.2f ms, atomic sums %.2f ms (the index "
+                    "flattened in %.2f ms); %s\n",
+                    1e3 * win.flat_select_seconds, 1e3 * win.atomic_sum_seconds, 1e3 * win.flatten_seconds,
+                    win.same_kernel_forms ? "equal to the host forms" : "DIFFER from the host forms");
+        failures += !win.same_changes + !win.same_kernel_forms;
         out << " {\"scene\": \"" << scenes[k].first << "\", \"name\": \"" << c.name << "\", \"rays\": " << c.rays.size()
             << ", \"move_rays\": " << c.move_rays.size() << ", \"cpu2_full_s\": " << number(cpu2.full_seconds)
             << ", \"cpu_threads\": " << threads << ", \"cpu_full_s\": " << number(cpun.full_seconds)
@@ -162,6 +197,10 @@ int main(int argc, char** argv) try {
             << ", \"window_select_s\": " << number(win.select_seconds)
             << ", \"cpu2_window_retrace_s\": " << number(win.retrace_seconds)
             << ", \"window_sum_s\": " << number(win.sum_seconds)
+            << ", \"cpu2_flat_select_s\": " << number(win.flat_select_seconds)
+            << ", \"cpu2_atomic_sum_s\": " << number(win.atomic_sum_seconds)
+            << ", \"flatten_s\": " << number(win.flatten_seconds)
+            << ", \"window_same_kernel_forms\": " << (win.same_kernel_forms ? "true" : "false")
             << ", \"window_same_changes\": " << (win.same_changes ? "true" : "false") << ", \"gpu\": ";
         if (!device) {
             out << "null}";
@@ -178,11 +217,20 @@ int main(int argc, char** argv) try {
                 "(%.1fx one by one on 1 CPU thread); records %s\n",
                 1e3 * g.window_seconds, moves / gpu_window, win.per_move_seconds / gpu_window,
                 g.same_window ? "equal" : "DIFFER");
-            failures += !g.same_histogram + !g.same_move + !g.same_window;
+            std::printf(
+                "  window on the GPU, selection to sums: %.2f ms, %.0f moves/s (%.1fx one by one on 1 CPU thread); "
+                "state upload %.2f ms; pairs and changes %s\n",
+                1e3 * g.device_window_seconds, moves / g.device_window_seconds,
+                win.per_move_seconds / g.device_window_seconds, 1e3 * g.state_seconds,
+                g.same_device_window ? "equal" : "DIFFER");
+            failures += !g.same_histogram + !g.same_move + !g.same_window + !g.same_device_window;
             out << "{\"full_s\": " << number(g.full_seconds) << ", \"move_s\": " << number(g.move_seconds)
                 << ", \"upload_s\": " << number(g.upload_seconds)
                 << ", \"window_retrace_s\": " << number(g.window_seconds)
                 << ", \"same_window\": " << (g.same_window ? "true" : "false")
+                << ", \"device_window_s\": " << number(g.device_window_seconds)
+                << ", \"state_upload_s\": " << number(g.state_seconds)
+                << ", \"same_device_window\": " << (g.same_device_window ? "true" : "false")
                 << ", \"same_histogram\": " << (g.same_histogram ? "true" : "false")
                 << ", \"same_move\": " << (g.same_move ? "true" : "false") << "}}";
         }

@@ -14,6 +14,7 @@
 #include <freeform/surface/overlay.hpp>
 #include <freeform/trace/path.hpp>
 #include <freeform/trace/tracer.hpp>
+#include <freeform/trace/window_kernel.hpp>
 
 namespace freeform::gpu_bench {
 
@@ -45,15 +46,29 @@ CpuTiming time_cpu(const BenchCase& c, int threads, int repeats);
 
 // The window's moves evaluated against the case's surface (IncrementalTrace): one after
 // another with IncrementalTrace::evaluate, as the annealer does on one thread, and
-// together with WindowEvaluation on 2 threads, whose three steps are timed apart. The
-// pairs and their records are kept for the GPU's retrace of the same pairs.
+// together with WindowEvaluation on 2 threads, whose three steps are timed apart, in their
+// host forms and their kernel forms. The pairs, their records and the changes are kept
+// for the GPU's evaluation of the same window.
 struct WindowTiming {
     double per_move_seconds = 0;  // the window's moves evaluated one by one, the median
     double window_seconds = 0;    // WindowEvaluation::evaluate on 2 threads, the median
     double select_seconds = 0, retrace_seconds = 0, sum_seconds = 0;  // its steps, medians
     bool same_changes = false;                                        // every move's change equal to evaluate()'s
+    // The kernel forms on 2 threads (select_flat, sum_atomic), the medians, and whether
+    // they gave the host forms' pairs and changes.
+    double flat_select_seconds = 0, atomic_sum_seconds = 0;
+    double flatten_seconds = 0;  // flatten() of the index (what a commit costs while the device copy is redone whole)
+    bool same_kernel_forms = false;
     std::vector<std::int32_t> proposals, rays;
     std::vector<RayRecord> records;
+    // What the device's whole window needs (cuda::DeviceWindowEvaluation), and the host's
+    // changes to compare with.
+    FlatRayCellIndex index;
+    std::vector<RayRecord> maintained;
+    std::vector<WindowPatch> patches;
+    std::vector<std::int32_t> slot_proposal;
+    float pad = 0;
+    std::vector<WindowChange> changes;
 };
 WindowTiming time_window_cpu(const BenchCase& c, int repeats);
 

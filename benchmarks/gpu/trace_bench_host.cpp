@@ -160,6 +160,37 @@ WindowTiming time_window_cpu(const BenchCase& c, int repeats) {
             same = same && b.histogram.value[std::size_t(a.cells[k])] == a.values[k];
         t.same_changes = t.same_changes && same;
     }
+    // The kernel forms, a device's steps, here on 2 threads.
+    WindowEvaluation k;
+    std::vector<double> flat_select, atomic_sum, flat;
+    for (int r = 0; r < std::max(repeats, 10); ++r) {
+        auto t0 = clock::now();
+        flatten(trace, t.index);
+        flat.push_back(seconds_since(t0));
+        t0 = clock::now();
+        k.select_flat(exec::omp_t{2}, trace, t.index.view(), c.window);
+        flat_select.push_back(seconds_since(t0));
+        k.retrace(exec::omp_t{2}, trace, c.window);
+        t0 = clock::now();
+        k.sum_atomic(exec::omp_t{2}, trace);
+        atomic_sum.push_back(seconds_since(t0));
+    }
+    t.flat_select_seconds = median(flat_select);
+    t.atomic_sum_seconds = median(atomic_sum);
+    t.flatten_seconds = median(flat);
+    t.same_kernel_forms = std::ranges::equal(k.rays(), w.rays()) && std::ranges::equal(k.proposals(), w.proposals());
+    for (std::size_t p = 0; p < c.window.size(); ++p) {
+        t.changes.push_back(k.change(p));
+        std::vector<std::pair<std::int32_t, Fixed>> a, b;
+        for (std::size_t j = 0; j < w.change(p).cells.size(); ++j) a.emplace_back(w.change(p).cells[j], w.change(p).values[j]);
+        for (std::size_t j = 0; j < k.change(p).cells.size(); ++j) b.emplace_back(k.change(p).cells[j], k.change(p).values[j]);
+        std::sort(a.begin(), a.end());
+        t.same_kernel_forms = t.same_kernel_forms && a == b && w.change(p).status_delta == k.change(p).status_delta &&
+                              w.change(p).rays_moved == k.change(p).rays_moved;
+    }
+    t.maintained = trace.records();
+    window_slots(trace, c.window, t.patches, t.slot_proposal);
+    t.pad = hf_detail::grid_of(c.surface.view()).z_pad;
     t.per_move_seconds = median(per_move);
     t.window_seconds = median(window);
     t.select_seconds = median(select);

@@ -110,6 +110,24 @@ void window_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, cons
     expect(on_gpu == expected, c.name + ": GPU window of three moves");
     expect(on_host == expected, c.name + ": host window of three moves");
     expect(!(on_gpu == cpu_trace(c, ray)), c.name + ": the window's moves change some records");
+
+    // The whole window on the device, selection to sums, against the host's kernel forms.
+    const WindowReference ref = cpu_window(c, moves);
+    cuda::DeviceWindowEvaluation dw;
+    dw.upload_state(ref.index.view(), ref.index.cells(), ref.index.rays(), ref.maintained);
+    dw.evaluate(exec::cuda_t{stream}, gpu, moves, ref.patches, ref.slot_proposal, ref.pad);
+    std::vector<std::int32_t> pairs_proposal, pairs_ray;
+    dw.download_pairs(pairs_proposal, pairs_ray);
+    expect(pairs_proposal == ref.proposals && pairs_ray == ref.rays, c.name + ": GPU window's pairs");
+    bool same = dw.size() == ref.changes.size(), moved = false;
+    for (std::size_t p = 0; same && p < dw.size(); ++p) {
+        const WindowChange &a = dw.change(p), &b = ref.changes[p];
+        same = a.cells == b.cells && a.values == b.values && a.status_delta == b.status_delta &&
+               a.rays_moved == b.rays_moved;
+        moved = moved || a.rays_moved > 0;
+    }
+    expect(same, c.name + ": GPU window's changes");
+    expect(moved, c.name + ": the window's moves move light");
 }
 
 void gpu_checks(Case& c, cudaStream_t stream) {

@@ -12,6 +12,7 @@
 #include <freeform/surface/overlay.hpp>
 #include <freeform/trace/path.hpp>
 #include <freeform/trace/tracer.hpp>
+#include <freeform/trace/window_kernel.hpp>
 
 namespace freeform::gpu_test {
 
@@ -35,6 +36,19 @@ Reference cpu_trace_all(const Case& c);
 std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids);
 // Through a proposed move, without changing c.surface.
 std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids, const HeightOverlay& o);
+
+// A window of moves evaluated on the host by WindowEvaluation's kernel forms (select_flat,
+// sum_atomic) under exec::seq, with what a device needs to evaluate the same window
+// (cuda::DeviceWindowEvaluation): the flat index, the maintained records, the slots.
+struct WindowReference {
+    FlatRayCellIndex index;
+    std::vector<RayRecord> maintained;
+    std::vector<WindowPatch> patches;
+    std::vector<std::int32_t> slot_proposal, proposals, rays;
+    float pad = 0;
+    std::vector<WindowChange> changes;
+};
+WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves);
 
 // A move in the middle of the surface, as the annealer proposes them.
 HeightOverlay bump_overlay(const Heightmap& hm);

@@ -8,6 +8,7 @@
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
 #include <freeform/trace/setup.hpp>
+#include <freeform/trace/window.hpp>
 
 #include "../support.hpp"
 
@@ -84,6 +85,24 @@ std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> id
     std::vector<RayRecord> records(ids.size());
     HeightfieldTracer(c.surface, c.rays, make_path_params(c.scene)).trace(exec::seq, ids, records);
     return records;
+}
+
+WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves) {
+    IncrementalTrace trace(c.surface, c.rays, make_path_params(c.scene));
+    trace.rebuild(exec::seq);
+    WindowReference r;
+    flatten(trace, r.index);
+    WindowEvaluation w;
+    w.select_flat(exec::seq, trace, r.index.view(), moves);
+    w.retrace(exec::seq, trace, moves);
+    w.sum_atomic(exec::seq, trace);
+    r.maintained = trace.records();
+    window_slots(trace, moves, r.patches, r.slot_proposal);
+    r.pad = hf_detail::grid_of(c.surface.view()).z_pad;
+    r.proposals.assign(w.proposals().begin(), w.proposals().end());
+    r.rays.assign(w.rays().begin(), w.rays().end());
+    for (std::size_t p = 0; p < w.size(); ++p) r.changes.push_back(w.change(p));
+    return r;
 }
 
 std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids, const HeightOverlay& o) {

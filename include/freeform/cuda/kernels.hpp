@@ -4,11 +4,11 @@
 // very same code under exec::seq and exec::omp over host memory as under exec::cuda over
 // device memory. The CPU tests check these functors, not copies of them, against
 // HeightfieldTracer (tests/test_exec.cpp); the GPU test checks them on the device.
-#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <span>
 
+#include "../core/atomic.hpp"
 #include "../core/fixed_point.hpp"
 #include "../core/hd.hpp"
 #include "../scene/rays.hpp"
@@ -17,17 +17,6 @@
 #include "../trace/tracer.hpp"
 
 namespace freeform::cuda {
-
-// Adds v to *p atomically: atomicAdd on the device, std::atomic_ref on the host, so the
-// functors below run under exec::omp as well as exec::cuda. Fixed amounts are added as
-// unsigned: two's complement addition wraps to the same bits as the signed sum.
-FREEFORM_HD inline void atomic_add(unsigned long long* p, unsigned long long v) {
-#if defined(__CUDA_ARCH__)
-    atomicAdd(p, v);
-#else
-    std::atomic_ref<unsigned long long>(*p).fetch_add(v, std::memory_order_relaxed);
-#endif
-}
 
 // Where a trace's weight went, accumulated per ray with atomics. Each lane is a copy of
 // the counters; ray k adds to lane k % totals_lanes, so the threads of a warp spread over

@@ -236,13 +236,11 @@ public:
         trace_records(policy, v, ids, records);
     }
 
-    // A window of moves in one launch (trace/window.hpp): pair k is ray ray[k] through
-    // moves[proposal[k]], its record into records[k]. The moves' heights and normals go
-    // up packed, one copy each, then their views, the pairs and one kernel over the pairs.
-    void trace_window(exec::cuda_t policy, std::span<const HeightOverlay> moves, std::span<const std::int32_t> proposal,
-                      std::span<const std::int32_t> ray, std::span<RayRecord> records) const {
-        check_window(moves.size(), proposal, ray, records);
-        if (ray.empty()) return;
+    // Copies a window's moves to the device and returns their views there (device memory,
+    // one per move, valid until the next call that uploads moves): the moves' heights and
+    // normals go up packed, one copy each, then the views. On `policy`'s stream; the
+    // caller's next synchronisation covers it.
+    const OverlayView* upload_window_views(exec::cuda_t policy, std::span<const HeightOverlay> moves) const {
         std::vector<float> heights;
         std::vector<Vec3> normals;
         std::vector<std::size_t> at_height, at_normal;
@@ -255,15 +253,26 @@ public:
         overlay_normals_.resize(std::max<std::size_t>(1, normals.size()));
         if (!heights.empty()) overlay_heights_.upload(std::span<const float>(heights), 0, policy.stream);
         if (!normals.empty()) overlay_normals_.upload(std::span<const Vec3>(normals), 0, policy.stream);
-        std::vector<OverlayView> views;
-        overlay_views(*surface_, moves, views);
+        host_views_.clear();
+        overlay_views(*surface_, moves, host_views_);
         for (std::size_t p = 0; p < moves.size(); ++p) {
-            static_cast<HeightfieldView&>(views[p]) = device_view();
-            views[p].oh = overlay_heights_.data() + at_height[p];
-            views[p].on = overlay_normals_.data() + at_normal[p];
+            static_cast<HeightfieldView&>(host_views_[p]) = device_view();
+            host_views_[p].oh = overlay_heights_.data() + at_height[p];
+            host_views_[p].on = overlay_normals_.data() + at_normal[p];
         }
-        window_views_.resize(views.size());
-        window_views_.upload(std::span<const OverlayView>(views), 0, policy.stream);
+        window_views_.resize(std::max<std::size_t>(1, host_views_.size()));
+        window_views_.upload(std::span<const OverlayView>(host_views_), 0, policy.stream);
+        return window_views_.data();
+    }
+
+    // A window of moves in one launch (trace/window.hpp): pair k is ray ray[k] through
+    // moves[proposal[k]], its record into records[k]. The moves go up (upload_window_views),
+    // then the pairs, then one kernel over the pairs.
+    void trace_window(exec::cuda_t policy, std::span<const HeightOverlay> moves, std::span<const std::int32_t> proposal,
+                      std::span<const std::int32_t> ray, std::span<RayRecord> records) const {
+        check_window(moves.size(), proposal, ray, records);
+        if (ray.empty()) return;
+        const OverlayView* views = upload_window_views(policy, moves);
         window_proposals_.resize(proposal.size());
         window_proposals_.upload(proposal, 0, policy.stream);
         ids_.resize(ray.size());
@@ -271,7 +280,7 @@ public:
         records_.resize(ray.size());
         policy.synchronize = false;  // the download below waits for the kernel
         for_each(policy, std::int64_t(ray.size()),
-                 WindowRetraceKernel<OverlayView>{window_views_.data(), params_, origin_.data(), direction_.data(),
+                 WindowRetraceKernel<OverlayView>{views, params_, origin_.data(), direction_.data(),
                                                   window_proposals_.data(), ids_.data(), records_.data()});
         records_.download(records, 0, policy.stream);
         check(cudaStreamSynchronize(policy.stream), "DeviceHeightfieldTracer::trace_window");
@@ -395,6 +404,7 @@ private:
     mutable DeviceBuffer<float> overlay_heights_;
     mutable DeviceBuffer<Vec3> overlay_normals_;
     mutable DeviceBuffer<OverlayView> window_views_;
+    mutable std::vector<OverlayView> host_views_;  // upload_window_views' staging (kept: its memory reused)
     mutable DeviceBuffer<std::int32_t> window_proposals_;
 };
 

@@ -26,18 +26,11 @@
 #include "../core/histogram.hpp"
 #include "../core/sparse_delta.hpp"
 #include "../surface/overlay.hpp"
+#include "crossing.hpp"
 #include "heightfield.hpp"
 #include "packet.hpp"
 
 namespace freeform {
-
-// One cell a ray's path crosses inside the slab, with the height range of the path over
-// it (the range the walk's culling test compares with the cell's corner heights).
-// Visitors that know no range (Embree's) record the whole line: never culled.
-struct CellCrossing {
-    std::int32_t cell = 0;
-    float zlo = -INFINITY, zhi = INFINITY;
-};
 
 // Both directions of the ray <-> surface cell relation, updated in place.
 class RayCellIndex {
@@ -123,6 +116,9 @@ public:
             if (!has(old, c.cell)) cell_rays_[std::size_t(c.cell)].push_back(ray);
         store(ray, cells);
     }
+
+    std::int64_t ray_count() const { return std::int64_t(slot_.size()); }
+    std::int64_t cell_count() const { return std::int64_t(cell_rays_.size()); }
 
     std::size_t memory_bytes() const {
         std::size_t b = pool_.capacity() * sizeof(CellCrossing) + slot_.capacity() * sizeof(Slot);
@@ -305,9 +301,6 @@ struct TracePart {
 struct TraceChange : TracePart {
     // Height ranges of the move's cells before and after it, widened as the walk's
     // culling test widens them (scratch of the ray selection).
-    struct CellReach {
-        float lo_before, hi_before, lo_after, hi_after;
-    };
     std::vector<CellReach> reach;
     std::vector<std::int32_t> cell_slot;  // surface cell -> its entry in reach, -1 outside the move
     std::vector<std::unique_ptr<TracePart>> parts;  // room for parts 1, 2, ... of a split
@@ -789,17 +782,12 @@ private:
             const HeightfieldView before = surface_->view();
             const OverlayView after = overlay_view(*surface_, o);
             const float pad = hf_detail::grid_of(before).z_pad;
-            const auto range = [&](const auto& view, int ci, int cj, float& lo, float& hi) {
-                const hf_detail::Corners c = hf_detail::corners(view, ci, cj);
-                lo = min_f(min_f(c.h00, c.h10), min_f(c.h01, c.h11)) - pad;
-                hi = max_f(max_f(c.h00, c.h10), max_f(c.h01, c.h11)) + pad;
-            };
             std::size_t k = 0;
             for (int cj = cells.j0; cj <= cells.j1; ++cj)
                 for (int ci = cells.i0; ci <= cells.i1; ++ci, ++k) {
-                    TraceChange::CellReach& r = change.reach[k];
-                    range(before, ci, cj, r.lo_before, r.hi_before);
-                    range(after, ci, cj, r.lo_after, r.hi_after);
+                    CellReach& r = change.reach[k];
+                    cell_height_range(before, ci, cj, pad, r.lo_before, r.hi_before);
+                    cell_height_range(after, ci, cj, pad, r.lo_after, r.hi_after);
                 }
         }
         // Slot of each move cell in change.reach, looked up by cell id (no divisions).
@@ -853,9 +841,7 @@ private:
                 if (k < 0) continue;
                 if (first && k < first_slot) return Verdict::earlier;
                 first = false;
-                const TraceChange::CellReach& r = change.reach[std::size_t(k)];
-                if ((c.zlo <= r.hi_before && c.zhi >= r.lo_before) || (c.zlo <= r.hi_after && c.zhi >= r.lo_after))
-                    return Verdict::reach;
+                if (within_reach(c, change.reach[std::size_t(k)])) return Verdict::reach;
             }
             return Verdict::out_of_reach;
         };

@@ -16,14 +16,20 @@
 // test_incremental.cpp), and the image terms, integer sums too (objective/
 // image_terms.hpp), give every proposal the same objective.
 //
-// What this does not do yet: the selection and the adding up of each proposal's pairs
-// run on the host (on the device they would be the ray/cell index's lookups and
-// fixed-point atomics into each proposal's cells, docs/cuda.md), and the cells each ray
-// crosses are not collected (a proposal that is accepted is evaluated again by
-// evaluate(), whose change commit() needs). DeviceHeightfieldTracer::trace_window
+// Each step has two forms. select() and sum() run on the host (select() walks the
+// incremental trace's own index, sum() adds each proposal's pairs up one by one), and
+// are what the annealer's window path uses on the CPU. select_flat() and sum_atomic() are
+// kernels only, the form a device runs: the selection reads a flat copy of the ray/cell
+// index (RayCellIndexView of a FlatRayCellIndex, filled by flatten()) a thread per (proposal, cell), and
+// the sums are fixed-point atomics into each proposal's dense change. Both forms give the
+// same pairs in the same order and the same changes (tests/test_incremental.cpp).
+// The cells each ray crosses are not collected: a proposal that is accepted is evaluated
+// again by evaluate(), whose change commit() needs. DeviceHeightfieldTracer::trace_window
 // retraces the pairs on the GPU.
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <numeric>
 #include <span>
 #include <vector>
 
@@ -34,15 +40,40 @@
 
 namespace freeform {
 
-// One proposal's change in a window: what IncrementalTrace::evaluate's TraceChange holds
-// but for the records and cells, compactly (the cells it changes, not a receiver-sized
-// array: a window holds many).
-struct WindowChange {
-    std::vector<std::int32_t> cells;                 // histogram cells whose value changes, in the order first touched
-    std::vector<Fixed> values;                       // their changes
-    std::array<Fixed, weight_slots> status_delta{};  // change of weight per slot (RayStatus, Fresnel)
-    std::int64_t rays_moved = 0;                     // rays whose record changed
-};
+// Fills `flat` with `trace`'s present ray/cell index: each cell's rays in the order of
+// its host list, each ray's crossings as stored.
+inline void flatten(const IncrementalTrace& trace, FlatRayCellIndex& flat) {
+    const RayCellIndex& index = trace.index();
+    flat.row = trace.surface().nx() - 1;
+    flat.cell_begin.assign(1, 0);
+    flat.cell_rays.clear();
+    for (std::int32_t c = 0; c < std::int32_t(index.cell_count()); ++c) {
+        const auto& list = index.rays_of(c);
+        flat.cell_rays.insert(flat.cell_rays.end(), list.begin(), list.end());
+        flat.cell_begin.push_back(std::int64_t(flat.cell_rays.size()));
+    }
+    flat.ray_begin.assign(1, 0);
+    flat.crossings.clear();
+    for (std::int32_t r = 0; r < std::int32_t(index.ray_count()); ++r) {
+        const auto cells = index.cells_of(r);
+        flat.crossings.insert(flat.crossings.end(), cells.begin(), cells.end());
+        flat.ray_begin.push_back(std::int64_t(flat.crossings.size()));
+    }
+}
+
+// The slots of a window (WindowSelectKernel's threads): each proposal's patch, the cells
+// its move changes, and per slot (a cell of a patch, proposal by proposal, row major) its
+// proposal. A move that changes nothing has no slots.
+inline void window_slots(const IncrementalTrace& trace, std::span<const HeightOverlay> moves,
+                         std::vector<WindowPatch>& patches, std::vector<std::int32_t>& slot_proposal) {
+    patches.resize(moves.size());
+    slot_proposal.clear();
+    for (std::size_t p = 0; p < moves.size(); ++p) {
+        const Patch a = moves[p].empty() ? Patch{} : trace.affected_cells(moves[p]);
+        patches[p] = WindowPatch{a.i0, a.j0, a.i1, a.j1, std::int64_t(slot_proposal.size())};
+        slot_proposal.insert(slot_proposal.end(), std::size_t(a.count()), std::int32_t(p));
+    }
+}
 
 // One window's evaluation, reused from window to window (it keeps its memory). In three
 // steps, so that the middle one can run elsewhere (DeviceHeightfieldTracer::trace_window
@@ -72,6 +103,42 @@ public:
             begin_.push_back(ray_.size());
         }
         records_.resize(ray_.size());
+        changes_.resize(n);
+    }
+
+    // select() as kernels over a flat index of `trace`'s (flatten() of its present
+    // state): the reach of every move's cells, then each cell's rays counted, then
+    // written where the counts' scan puts them. The same pairs in the same order.
+    template <HostPolicy P>
+    void select_flat(P policy, const IncrementalTrace& trace, const RayCellIndexView& index,
+                     std::span<const HeightOverlay> moves) {
+        const std::size_t n = moves.size();
+        window_slots(trace, moves, patches_, slot_proposal_);
+        const auto slots = std::int64_t(slot_proposal_.size());
+        overlay_views(trace.surface(), moves, views_);
+        const HeightfieldView base = trace.surface().view();
+        reach_.resize(slot_proposal_.size());
+        for_each(policy, slots,
+                 WindowReachKernel<OverlayView>{base, views_.data(), patches_.data(), slot_proposal_.data(),
+                                                hf_detail::grid_of(base).z_pad, reach_.data()});
+        WindowSelectKernel select{index, patches_.data(), slot_proposal_.data(), reach_.data()};
+        slot_count_.resize(slot_proposal_.size() + 1);
+        select.count = slot_count_.data();
+        for_each(policy, slots, select);
+        // The places: an exclusive scan of the counts (one more entry: the total).
+        slot_count_.back() = 0;
+        std::exclusive_scan(slot_count_.begin(), slot_count_.end(), slot_count_.begin(), std::int64_t(0));
+        const auto pairs = std::size_t(slot_count_.back());
+        proposal_.resize(pairs);
+        ray_.resize(pairs);
+        select.offset = slot_count_.data();
+        select.proposal = proposal_.data();
+        select.ray = ray_.data();
+        for_each(policy, slots, select);
+        begin_.resize(n + 1);
+        for (std::size_t p = 0; p < n; ++p) begin_[p] = std::size_t(slot_count_[std::size_t(patches_[p].slot)]);
+        begin_[n] = pairs;
+        records_.resize(pairs);
         changes_.resize(n);
     }
 
@@ -117,6 +184,40 @@ public:
         }
     }
 
+    // sum() as kernels: each pair's change (WindowAccountKernel), added into its
+    // proposal's dense change with atomics (WindowDepositKernel), each proposal's touched
+    // cells sorted, their values taken out (WindowGatherKernel). The same changes, each
+    // proposal's cells in increasing order. Its scratch is proposals x receiver cells.
+    template <HostPolicy P>
+    void sum_atomic(P policy, const IncrementalTrace& trace) {
+        const std::size_t n = changes_.size(), pairs = ray_.size();
+        pair_changes_.resize(pairs);
+        for_each(policy, std::int64_t(pairs),
+                 WindowAccountKernel{trace.params().receiver, ray_.data(), records_.data(), trace.records().data(),
+                                     trace.rays().weight.data(), pair_changes_.data()});
+        const auto cells = std::int64_t(trace.receiver_width()) * trace.receiver_height();
+        if (sums_.size() < n * std::size_t(cells)) {  // kept zero between windows (the gather clears what it reads)
+            sums_.resize(n * std::size_t(cells), 0);
+            claimed_.resize(n * std::size_t(cells), 0);
+        }
+        list_begin_.resize(n);
+        for (std::size_t p = 0; p < n; ++p) list_begin_[p] = 8 * std::int64_t(begin_[p]);
+        listed_.assign(n, 0);
+        touched_.resize(8 * pairs);
+        status_.assign(n * weight_slots, 0);
+        moved_.assign(n, 0);
+        for_each(
+            policy, std::int64_t(pairs),
+            WindowDepositKernel{proposal_.data(), pair_changes_.data(), cells, sums_.data(), claimed_.data(),
+                                list_begin_.data(), listed_.data(), touched_.data(), status_.data(), moved_.data()});
+        pack_touched(touched_, list_begin_, listed_, entry_proposal_, entry_cell_);
+        entry_value_.resize(entry_cell_.size());
+        for_each(policy, std::int64_t(entry_cell_.size()),
+                 WindowGatherKernel{entry_proposal_.data(), entry_cell_.data(), cells, sums_.data(), claimed_.data(),
+                                    entry_value_.data()});
+        unpack_changes(listed_, entry_cell_, entry_value_, status_, moved_, changes_);
+    }
+
     std::size_t size() const { return changes_.size(); }
     const WindowChange& change(std::size_t p) const { return changes_[p]; }
     // Proposal p's rays, in evaluate()'s order.
@@ -137,6 +238,18 @@ private:
     std::vector<std::size_t> begin_;  // proposal p's pairs: [begin_[p], begin_[p + 1])
     std::vector<RayRecord> records_;
     std::vector<PairChange> pair_changes_;  // per pair, after sum()'s kernel
+    // select_flat()'s: per proposal, per slot (a cell of a proposal's patch), counts and places
+    std::vector<WindowPatch> patches_;
+    std::vector<std::int32_t> slot_proposal_;
+    std::vector<CellReach> reach_;
+    std::vector<std::int64_t> slot_count_;
+    // sum_atomic()'s: dense changes and claims (proposals x cells), touched lists, totals
+    std::vector<unsigned long long> sums_;
+    std::vector<unsigned int> claimed_;
+    std::vector<std::int64_t> list_begin_;
+    std::vector<unsigned long long> listed_, status_, moved_;
+    std::vector<std::int32_t> touched_, entry_proposal_, entry_cell_;
+    std::vector<Fixed> entry_value_;
 };
 
 }  // namespace freeform
