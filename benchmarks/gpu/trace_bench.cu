@@ -43,18 +43,19 @@ struct GpuTiming {
     bool same_histogram = false, same_move = false, same_window = false;
     // The whole window on the device (cuda::DeviceWindowEvaluation): selection to sums,
     // and the copy of the state it reads (the index and the records, after a commit).
-    double device_window_seconds = 0, state_seconds = 0;
-    bool same_device_window = false;
+    double device_window_seconds = 0, state_seconds = 0, commit_seconds = 0;
+    bool same_device_window = false, device_commit_fits = false;
 };
 
-// The whole window on the device, timed, its pairs and changes compared with the host's.
+// The whole window on the device, timed, its pairs and changes compared with the host's;
+// and the commit of the window's first move on the device, timed.
 void time_device_window(const BenchCase& c, const cuda::DeviceHeightfieldTracer& gpu, const WindowTiming& window,
                         int repeats, GpuTiming& g) {
     cuda::DeviceWindowEvaluation dw;
-    std::vector<double> state, windows;
+    std::vector<double> state, windows, commits;
     for (int r = 0; r < std::max(repeats, 20); ++r) {
         const auto t1 = clock_type::now();
-        dw.upload_state(window.index.view(), window.index.cells(), window.index.rays(), window.maintained);
+        dw.upload_state(window.slotted, window.maintained);
         state.push_back(since(t1));
         const auto t2 = clock_type::now();
         dw.evaluate(exec::cuda, gpu, c.window, window.patches, window.slot_proposal, window.pad);
@@ -62,14 +63,23 @@ void time_device_window(const BenchCase& c, const cuda::DeviceHeightfieldTracer&
     }
     std::vector<std::int32_t> proposals, rays;
     dw.download_pairs(proposals, rays);
-    g.same_device_window = proposals == window.proposals && rays == window.rays && dw.size() == window.changes.size();
+    g.same_device_window =
+        proposals == window.slotted_proposals && rays == window.slotted_rays && dw.size() == window.changes.size();
     for (std::size_t p = 0; g.same_device_window && p < dw.size(); ++p) {
         const WindowChange &a = dw.change(p), &b = window.changes[p];
         g.same_device_window = a.cells == b.cells && a.values == b.values && a.status_delta == b.status_delta &&
                                a.rays_moved == b.rays_moved;
     }
+    for (int r = 0; r < std::max(repeats, 20); ++r) {
+        dw.upload_state(window.slotted, window.maintained);
+        const auto t1 = clock_type::now();
+        g.device_commit_fits =
+            dw.commit(exec::cuda, window.commit_rays, window.commit_records, window.commit_begin, window.commit_cells);
+        commits.push_back(since(t1));
+    }
     g.device_window_seconds = median(windows);
     g.state_seconds = median(state);
+    g.commit_seconds = median(commits);
 }
 
 GpuTiming time_gpu(const BenchCase& c, const CpuTiming& cpu, const WindowTiming& window, int repeats) {
@@ -219,17 +229,18 @@ int main(int argc, char** argv) try {
                 g.same_window ? "equal" : "DIFFER");
             std::printf(
                 "  window on the GPU, selection to sums: %.2f ms, %.0f moves/s (%.1fx one by one on 1 CPU thread); "
-                "state upload %.2f ms; pairs and changes %s\n",
+                "state upload %.2f ms, a commit %.3f ms%s; pairs and changes %s\n",
                 1e3 * g.device_window_seconds, moves / g.device_window_seconds,
-                win.per_move_seconds / g.device_window_seconds, 1e3 * g.state_seconds,
-                g.same_device_window ? "equal" : "DIFFER");
-            failures += !g.same_histogram + !g.same_move + !g.same_window + !g.same_device_window;
+                win.per_move_seconds / g.device_window_seconds, 1e3 * g.state_seconds, 1e3 * g.commit_seconds,
+                g.device_commit_fits ? "" : " (OUT OF ROOM)", g.same_device_window ? "equal" : "DIFFER");
+            failures += !g.same_histogram + !g.same_move + !g.same_window + !g.same_device_window + !g.device_commit_fits;
             out << "{\"full_s\": " << number(g.full_seconds) << ", \"move_s\": " << number(g.move_seconds)
                 << ", \"upload_s\": " << number(g.upload_seconds)
                 << ", \"window_retrace_s\": " << number(g.window_seconds)
                 << ", \"same_window\": " << (g.same_window ? "true" : "false")
                 << ", \"device_window_s\": " << number(g.device_window_seconds)
                 << ", \"state_upload_s\": " << number(g.state_seconds)
+                << ", \"commit_s\": " << number(g.commit_seconds)
                 << ", \"same_device_window\": " << (g.same_device_window ? "true" : "false")
                 << ", \"same_histogram\": " << (g.same_histogram ? "true" : "false")
                 << ", \"same_move\": " << (g.same_move ? "true" : "false") << "}}";

@@ -14,6 +14,7 @@
 #include <freeform/surface/overlay.hpp>
 #include <freeform/trace/path.hpp>
 #include <freeform/trace/tracer.hpp>
+#include <freeform/trace/index_kernel.hpp>
 #include <freeform/trace/window_kernel.hpp>
 
 namespace freeform::gpu_bench {
@@ -64,7 +65,13 @@ struct WindowTiming {
     // What the device's whole window needs (cuda::DeviceWindowEvaluation), and the host's
     // changes to compare with.
     FlatRayCellIndex index;
+    SlottedRayCellIndex slotted;                               // the device's form of it
+    std::vector<std::int32_t> slotted_proposals, slotted_rays;  // the pairs selected from it
     std::vector<RayRecord> maintained;
+    // The first move's change, as cuda::DeviceWindowEvaluation::commit takes it.
+    std::vector<std::int32_t> commit_rays, commit_begin;
+    std::vector<RayRecord> commit_records;
+    std::vector<CellCrossing> commit_cells;
     std::vector<WindowPatch> patches;
     std::vector<std::int32_t> slot_proposal;
     float pad = 0;

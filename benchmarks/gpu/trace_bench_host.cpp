@@ -189,6 +189,13 @@ WindowTiming time_window_cpu(const BenchCase& c, int repeats) {
                               w.change(p).rays_moved == k.change(p).rays_moved;
     }
     t.maintained = trace.records();
+    t.slotted.assign(t.index);
+    k.select_flat(exec::seq, trace, t.slotted.view().selection(), c.window);
+    t.slotted_proposals.assign(k.proposals().begin(), k.proposals().end());
+    t.slotted_rays.assign(k.rays().begin(), k.rays().end());
+    const TraceChange& first = single[0];
+    t.commit_rays = first.rays, t.commit_records = first.records;
+    t.commit_begin = first.cell_begin, t.commit_cells = first.cells;
     window_slots(trace, c.window, t.patches, t.slot_proposal);
     t.pad = hf_detail::grid_of(c.surface.view()).z_pad;
     t.per_move_seconds = median(per_move);

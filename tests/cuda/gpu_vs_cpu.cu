@@ -87,13 +87,24 @@ void host_checks(const Case& c) {
                 static_cast<long long>(ref.totals.rays), split.c_str());
 }
 
-// A window of moves in one launch (trace_window, trace/window.hpp): `o`, the same move a
-// little higher, and an empty one, each with every other ray, the pairs interleaved.
-void window_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, const HeightOverlay& o,
-                   cudaStream_t stream) {
-    std::vector<HeightOverlay> moves{o, o, HeightOverlay{}};
-    for (float& h : moves[1].heights) h = c.surface.clamp_height(h + 1e-5f);
-    moves[1].finish(c.surface);
+// Whether a window evaluated on the device gave the host's pairs and changes.
+bool same_result(const cuda::DeviceWindowEvaluation& dw, const WindowResult& r) {
+    std::vector<std::int32_t> proposals, rays;
+    dw.download_pairs(proposals, rays);
+    bool same = proposals == r.proposals && rays == r.rays && dw.size() == r.changes.size();
+    for (std::size_t p = 0; same && p < dw.size(); ++p) {
+        const WindowChange &a = dw.change(p), &b = r.changes[p];
+        same = a.cells == b.cells && a.values == b.values && a.status_delta == b.status_delta &&
+               a.rays_moved == b.rays_moved;
+    }
+    return same;
+}
+
+// A window of moves in one launch (trace_window, trace/window.hpp): each move with every
+// other ray, the pairs interleaved; then the whole window on the device, selection to sums
+// (cuda::DeviceWindowEvaluation), against the host's kernel forms.
+void window_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, std::span<const HeightOverlay> moves,
+                   const WindowReference& ref, cudaStream_t stream) {
     std::vector<std::int32_t> proposal, ray;
     for (std::int32_t k = 0; k < std::int32_t(c.rays.size()); k += 2)
         for (std::int32_t p = 0; p < 3; ++p) proposal.push_back(p), ray.push_back(k);
@@ -111,23 +122,26 @@ void window_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, cons
     expect(on_host == expected, c.name + ": host window of three moves");
     expect(!(on_gpu == cpu_trace(c, ray)), c.name + ": the window's moves change some records");
 
-    // The whole window on the device, selection to sums, against the host's kernel forms.
-    const WindowReference ref = cpu_window(c, moves);
     cuda::DeviceWindowEvaluation dw;
-    dw.upload_state(ref.index.view(), ref.index.cells(), ref.index.rays(), ref.maintained);
-    dw.evaluate(exec::cuda_t{stream}, gpu, moves, ref.patches, ref.slot_proposal, ref.pad);
-    std::vector<std::int32_t> pairs_proposal, pairs_ray;
-    dw.download_pairs(pairs_proposal, pairs_ray);
-    expect(pairs_proposal == ref.proposals && pairs_ray == ref.rays, c.name + ": GPU window's pairs");
-    bool same = dw.size() == ref.changes.size(), moved = false;
-    for (std::size_t p = 0; same && p < dw.size(); ++p) {
-        const WindowChange &a = dw.change(p), &b = ref.changes[p];
-        same = a.cells == b.cells && a.values == b.values && a.status_delta == b.status_delta &&
-               a.rays_moved == b.rays_moved;
-        moved = moved || a.rays_moved > 0;
-    }
-    expect(same, c.name + ": GPU window's changes");
+    dw.upload_state(ref.index, ref.maintained);
+    dw.evaluate(exec::cuda_t{stream}, gpu, moves, ref.before.patches, ref.before.slot_proposal, ref.pad);
+    expect(same_result(dw, ref.before), c.name + ": GPU window, selection to sums");
+}
+
+// The window's first move committed on the device (cuda::DeviceWindowEvaluation::commit)
+// and the others evaluated again. Called once that move is committed to c.surface and to
+// the GPU tracer (surface_changed).
+void device_commit_checks(const Case& c, const cuda::DeviceHeightfieldTracer& gpu, const WindowReference& ref,
+                          std::span<const HeightOverlay> moves, cudaStream_t stream) {
+    cuda::DeviceWindowEvaluation dw;
+    dw.upload_state(ref.index, ref.maintained);
+    bool moved = false;
+    for (const WindowChange& change : ref.before.changes) moved = moved || change.rays_moved > 0;
     expect(moved, c.name + ": the window's moves move light");
+    expect(dw.commit(exec::cuda_t{stream}, ref.commit_rays, ref.commit_records, ref.commit_begin, ref.commit_cells),
+           c.name + ": GPU commit");
+    dw.evaluate(exec::cuda_t{stream}, gpu, moves.subspan(1), ref.after.patches, ref.after.slot_proposal, ref.pad);
+    expect(same_result(dw, ref.after), c.name + ": GPU window after a GPU commit");
 }
 
 void gpu_checks(Case& c, cudaStream_t stream) {
@@ -162,9 +176,15 @@ void gpu_checks(Case& c, cudaStream_t stream) {
     const std::vector<RayRecord> preview_cpu = cpu_trace(c, all, o);
     expect(preview_gpu == preview_cpu, c.name + ": GPU records through an overlay");
     expect(preview_host == preview_cpu, c.name + ": host records through an overlay");
-    window_checks(c, gpu, o, stream);
+    // A window: `o`, the same move a little higher, and an empty one.
+    std::vector<HeightOverlay> moves{o, o, HeightOverlay{}};
+    for (float& height : moves[1].heights) height = c.surface.clamp_height(height + 1e-5f);
+    moves[1].finish(c.surface);
+    const WindowReference window = cpu_window(c, moves);
+    window_checks(c, gpu, moves, window, stream);
     o.commit(c.surface);
     gpu.surface_changed(o.patch);
+    device_commit_checks(c, gpu, window, moves, stream);
     expect(preview_cpu == cpu_trace(c, all), c.name + ": overlay preview equals the committed surface");
     const Reference after_cpu = cpu_trace_all(c);
     Reference after_gpu{Histogram(w, h), {}};

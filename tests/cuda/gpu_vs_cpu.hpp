@@ -12,6 +12,7 @@
 #include <freeform/surface/overlay.hpp>
 #include <freeform/trace/path.hpp>
 #include <freeform/trace/tracer.hpp>
+#include <freeform/trace/index_kernel.hpp>
 #include <freeform/trace/window_kernel.hpp>
 
 namespace freeform::gpu_test {
@@ -37,16 +38,24 @@ std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> id
 // Through a proposed move, without changing c.surface.
 std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids, const HeightOverlay& o);
 
-// A window of moves evaluated on the host by WindowEvaluation's kernel forms (select_flat,
-// sum_atomic) under exec::seq, with what a device needs to evaluate the same window
-// (cuda::DeviceWindowEvaluation): the flat index, the maintained records, the slots.
-struct WindowReference {
-    FlatRayCellIndex index;
-    std::vector<RayRecord> maintained;
+// A window of moves evaluated on the host by WindowEvaluation's kernel forms (select_flat
+// over a slotted index, sum_atomic) under exec::seq, with what a device needs to evaluate
+// the same window (cuda::DeviceWindowEvaluation); then the window's first move accepted
+// (its change, as the device's commit() takes it) and the other moves evaluated against
+// the state it leaves.
+struct WindowResult {
     std::vector<WindowPatch> patches;
     std::vector<std::int32_t> slot_proposal, proposals, rays;
-    float pad = 0;
     std::vector<WindowChange> changes;
+};
+struct WindowReference {
+    SlottedRayCellIndex index;
+    std::vector<RayRecord> maintained;
+    float pad = 0;
+    WindowResult before, after;
+    std::vector<std::int32_t> commit_rays, commit_begin;
+    std::vector<RayRecord> commit_records;
+    std::vector<CellCrossing> commit_cells;
 };
 WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves);
 

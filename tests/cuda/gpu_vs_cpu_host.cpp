@@ -87,21 +87,44 @@ std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> id
     return records;
 }
 
-WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves) {
-    IncrementalTrace trace(c.surface, c.rays, make_path_params(c.scene));
-    trace.rebuild(exec::seq);
-    WindowReference r;
-    flatten(trace, r.index);
+namespace {
+WindowResult evaluate_window(const IncrementalTrace& trace, SlottedRayCellIndex& index,
+                             std::span<const HeightOverlay> moves) {
+    WindowResult r;
     WindowEvaluation w;
-    w.select_flat(exec::seq, trace, r.index.view(), moves);
+    w.select_flat(exec::seq, trace, index.view().selection(), moves);
     w.retrace(exec::seq, trace, moves);
     w.sum_atomic(exec::seq, trace);
-    r.maintained = trace.records();
     window_slots(trace, moves, r.patches, r.slot_proposal);
-    r.pad = hf_detail::grid_of(c.surface.view()).z_pad;
     r.proposals.assign(w.proposals().begin(), w.proposals().end());
     r.rays.assign(w.rays().begin(), w.rays().end());
     for (std::size_t p = 0; p < w.size(); ++p) r.changes.push_back(w.change(p));
+    return r;
+}
+}  // namespace
+
+WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves) {
+    Heightmap surface = c.surface;  // a copy: the first move is committed to it
+    IncrementalTrace trace(surface, c.rays, make_path_params(c.scene));
+    trace.rebuild(exec::seq);
+    WindowReference r;
+    FlatRayCellIndex flat;
+    flatten(trace, flat);
+    r.index.assign(flat);
+    r.maintained = trace.records();
+    r.pad = hf_detail::grid_of(surface.view()).z_pad;
+    r.before = evaluate_window(trace, r.index, moves);
+    TraceChange single;
+    trace.evaluate(moves[0], single);
+    r.commit_rays = single.rays, r.commit_records = single.records;
+    r.commit_begin = single.cell_begin, r.commit_cells = single.cells;
+    moves[0].commit(surface);
+    trace.commit(single);
+    SlottedRayCellIndex after = r.index;
+    std::vector<RayRecord> records = r.maintained;
+    after.commit(exec::seq, {single.rays.data(), single.records.data(), single.cell_begin.data(), single.cells.data()},
+                 std::int64_t(single.rays.size()), records.data());
+    r.after = evaluate_window(trace, after, moves.subspan(1));
     return r;
 }
 

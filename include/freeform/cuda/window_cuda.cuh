@@ -5,10 +5,14 @@
 // flat ray/cell index and the maintained records are kept on the device; a window sends
 // up its moves and their patches and gets back each proposal's compact change.
 //
-// What still runs on the host: the scan of the slots' counts (a download, a scan, an
-// upload), the sort of each proposal's touched cells, and the planning of the slots
-// (window_slots). The state is copied up whole after each commit (upload_state); a
-// commit on the device (records and index updated in place) is the next step.
+// The index is the slotted one (trace/index_kernel.hpp), copied up once (upload_state)
+// and updated in place by commit() when a move is accepted: the accepted move's rays,
+// records and crossings go up (the host evaluates it, as the annealer's window path
+// does), the commit kernels do the rest. Its lists are sorted by ray id, so a window's
+// pairs come in another order than the host index's: compare with a host
+// SlottedRayCellIndex. What still runs on the host: the scan of the slots' counts (a
+// download, a scan, an upload), the sort of each proposal's touched cells, and the
+// planning of the slots (window_slots).
 //
 // Not yet run on a device (no session so far has had one): nvcc compiles it in CI
 // (cuda_compile), and the very kernels it launches are checked bit for bit under
@@ -24,6 +28,7 @@
 #include <cuda_runtime.h>
 
 #include "../core/exec.hpp"
+#include "../trace/index_kernel.hpp"
 #include "../trace/window_kernel.hpp"
 #include "exec_cuda.cuh"
 #include "trace_cuda.cuh"
@@ -32,21 +37,64 @@ namespace freeform::cuda {
 
 class DeviceWindowEvaluation {
 public:
-    // Copies the maintained state to the device: the flat ray/cell index (host arrays:
-    // `cells` surface cells, `rays` rays) and the records. Call after every commit.
-    void upload_state(const RayCellIndexView& index, std::int64_t cells, std::int64_t rays,
-                      std::span<const RayRecord> records) {
-        const auto put = [](auto& buffer, const auto* host, std::int64_t n) {
-            using T = std::remove_cvref_t<decltype(*host)>;
-            buffer.resize(std::size_t(std::max<std::int64_t>(n, 1)));
-            buffer.upload(std::span<const T>(host, std::size_t(n)));
+    // Copies the maintained state to the device: the slotted ray/cell index (its pools'
+    // spare room included) and the records. Once, and again when commit() fails.
+    void upload_state(const SlottedRayCellIndex& index, std::span<const RayRecord> records) {
+        const auto put = [](auto& buffer, const auto& host) {
+            using T = typename std::remove_cvref_t<decltype(host)>::value_type;
+            buffer.resize(std::max<std::size_t>(host.size(), 1));
+            buffer.upload(std::span<const T>(host));
         };
-        put(cell_begin_, index.cell_begin, cells + 1);
-        put(cell_rays_, index.cell_rays, index.cell_begin[cells]);
-        put(ray_begin_, index.ray_begin, rays + 1);
-        put(crossings_, index.crossings, index.ray_begin[rays]);
-        put(maintained_, records.data(), std::int64_t(records.size()));
-        index_ = {cell_begin_.data(), cell_rays_.data(), ray_begin_.data(), crossings_.data(), index.row};
+        put(cell_begin_, index.cell_begin), put(cell_count_, index.cell_count), put(cell_room_, index.cell_room);
+        put(cell_rays_, index.cell_rays), put(ray_begin_, index.ray_begin), put(ray_count_, index.ray_count);
+        put(ray_room_, index.ray_room), put(crossings_, index.crossings), put(used_, index.used);
+        put(maintained_, std::vector<RayRecord>(records.begin(), records.end()));
+        const auto cells = index.cell_begin.size();
+        dirty_mark_.resize(std::max<std::size_t>(cells, 1)), added_.resize(std::max<std::size_t>(cells, 1));
+        dirty_mark_.zero(), added_.zero();
+        dirty_.resize(std::max<std::size_t>(cells, 1)), dirty_count_.resize(1), overflow_.resize(1);
+        index_ = {cell_begin_.data(),
+                  cell_count_.data(),
+                  cell_room_.data(),
+                  cell_rays_.data(),
+                  ray_begin_.data(),
+                  ray_count_.data(),
+                  ray_room_.data(),
+                  crossings_.data(),
+                  index.row,
+                  used_.data(),
+                  used_.data() + 1,
+                  std::int64_t(index.cell_rays.size()),
+                  std::int64_t(index.crossings.size())};
+    }
+
+    // Commits an accepted move's change (its rays, their new records and crossings: host
+    // arrays as TracePart holds them) to the device's index and records with the commit
+    // kernels (trace/index_kernel.hpp). False when a pool ran out of room: then call
+    // upload_state with the host's index.
+    bool commit(exec::cuda_t policy, std::span<const std::int32_t> rays, std::span<const RayRecord> records,
+                std::span<const std::int32_t> crossing_begin, std::span<const CellCrossing> crossings) {
+        policy.synchronize = false;
+        upload(change_rays_, rays, policy), upload(change_records_, records, policy);
+        upload(change_begin_, crossing_begin, policy), upload(change_crossings_, crossings, policy);
+        const IndexChangeView change{change_rays_.data(), change_records_.data(), change_begin_.data(),
+                                     change_crossings_.data()};
+        const IndexCommitScratch s{dirty_mark_.data(), added_.data(), dirty_.data(), dirty_count_.data(),
+                                   overflow_.data()};
+        dirty_count_.zero(policy.stream), overflow_.zero(policy.stream);
+        const auto n = std::int64_t(rays.size());
+        for_each(policy, n, IndexUnlistKernel{index_, change, s});
+        unsigned long long dirty = 0;
+        dirty_count_.download(std::span(&dirty, 1), 0, policy.stream);
+        check(cudaStreamSynchronize(policy.stream), "DeviceWindowEvaluation::commit: dirty cells");
+        for_each(policy, std::int64_t(dirty), IndexGrowKernel{index_, s});
+        for_each(policy, n, IndexAppendKernel{index_, change, s});
+        for_each(policy, std::int64_t(dirty), IndexSettleKernel{index_, s});
+        for_each(policy, n, IndexStoreKernel{index_, change, maintained_.data(), s.overflow});
+        unsigned int overflow = 0;
+        overflow_.download(std::span(&overflow, 1), 0, policy.stream);
+        check(cudaStreamSynchronize(policy.stream), "DeviceWindowEvaluation::commit");
+        return overflow == 0;
     }
 
     // Evaluates `moves` against the uploaded state: `patches` and `slot_proposal` as
@@ -65,7 +113,7 @@ public:
                  WindowReachKernel<OverlayView>{tracer.device_view(), views, patches_.data(), slot_proposal_.data(),
                                                 pad, reach_.data()});
         // Each slot's rays counted, the counts scanned on the host, the pairs written.
-        WindowSelectKernel select{index_, patches_.data(), slot_proposal_.data(), reach_.data()};
+        WindowSelectKernel select{index_.selection(), patches_.data(), slot_proposal_.data(), reach_.data()};
         counts_.resize(std::size_t(std::max<std::int64_t>(slots, 1)));
         select.count = counts_.data();
         for_each(policy, slots, select);
@@ -155,12 +203,17 @@ private:
         unpack_changes(host_listed_, entry_cell_, host_values_, host_status_, host_moved_, changes_);
     }
 
-    // The state (upload_state).
+    // The state (upload_state, commit) and the commit's scratch.
     DeviceBuffer<std::int64_t> cell_begin_, ray_begin_;
-    DeviceBuffer<std::int32_t> cell_rays_;
+    DeviceBuffer<std::int32_t> cell_count_, cell_room_, cell_rays_, ray_count_, ray_room_;
     DeviceBuffer<CellCrossing> crossings_;
+    DeviceBuffer<unsigned long long> used_, dirty_count_;
     DeviceBuffer<RayRecord> maintained_;
-    RayCellIndexView index_;
+    SlottedIndexView index_;
+    DeviceBuffer<unsigned int> dirty_mark_, added_, overflow_;
+    DeviceBuffer<std::int32_t> dirty_, change_rays_, change_begin_;
+    DeviceBuffer<RayRecord> change_records_;
+    DeviceBuffer<CellCrossing> change_crossings_;
     // A window's, on the device and their host copies; kept from window to window.
     DeviceBuffer<WindowPatch> patches_;
     DeviceBuffer<std::int32_t> slot_proposal_, proposal_, ray_, touched_, device_entry_proposal_, device_entry_cell_;
