@@ -629,27 +629,40 @@ TEST_CASE("a problem built on the trace of the one before it follows a rebuilt o
 
 TEST_CASE("an annealing run whose windows are evaluated together is the per-move run bit for bit") {
     // The batch logic of a design on a GPU (trace/window.hpp), run by the annealer on the
-    // CPU: speculative windows of 8 moves, their rays retraced by one kernel call.
+    // CPU: speculative windows of 8 moves, their rays retraced by one kernel call; in the
+    // host forms, and in the kernel forms with the state kept apart as a device keeps it.
     for (const Case& c : cases()) {
         CAPTURE(c.name);
-        const auto run = [&](bool windows, int speculative, int threads) {
+        // windows: 0 off, 1 the host forms, 2 the kernel forms over a slotted index kept
+        // apart and updated by the commit kernels (what a device does).
+        const auto run = [&](int windows, int speculative, int threads) {
             Setup s = make_setup(c);
             SurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                    make_bandit(BanditKind::history, 7), 1e-4, 1.0);
-            problem.set_window_evaluation(windows);
+            problem.set_window_evaluation(windows == 1);
+            if (windows == 2)
+                problem.set_window_evaluator(std::make_unique<CopiedStateWindowEvaluator>(
+                    std::make_unique<HostKernelWindowBackend<exec::omp_t>>(exec::omp_t{threads})));
             const AnnealResult r = anneal(problem, fixed_windows(600, speculative, threads));
             CHECK(problem.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+            if (windows == 2) {  // the state was copied once and then kept by the commit kernels
+                const auto& e = dynamic_cast<const CopiedStateWindowEvaluator&>(*problem.window_evaluator());
+                CHECK(e.commits() > 20);
+                CHECK(e.copies() * 10 < e.commits());
+            }
             return std::make_pair(r, s.hm.heights());
         };
-        const auto serial = run(false, 1, 1);
+        const auto serial = run(0, 1, 1);
         CHECK(serial.first.accepted > 20);
-        for (const int threads : {1, 2}) {
-            const auto windows = run(true, 8, threads);
-            CHECK(windows.first.accepted == serial.first.accepted);
-            CHECK(windows.first.final_energy == serial.first.final_energy);
-            CHECK(windows.second == serial.second);
-            CHECK(windows.first.proposals_evaluated > windows.first.iterations);  // windows really ran
-        }
+        for (const int windows : {1, 2})
+            for (const int threads : {1, 2}) {
+                CAPTURE(windows);
+                const auto together = run(windows, 8, threads);
+                CHECK(together.first.accepted == serial.first.accepted);
+                CHECK(together.first.final_energy == serial.first.final_energy);
+                CHECK(together.second == serial.second);
+                CHECK(together.first.proposals_evaluated > together.first.iterations);  // windows really ran
+            }
     }
 }
 

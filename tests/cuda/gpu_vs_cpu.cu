@@ -195,6 +195,17 @@ void gpu_checks(Case& c, cudaStream_t stream) {
     std::printf("%-43s GPU == CPU (histogram, totals, records, overlay, window, surface_changed)\n", c.name.c_str());
 }
 
+}  // namespace
+
+namespace freeform::gpu_test {
+std::unique_ptr<WindowBackend> make_device_backend(const Heightmap& surface, const RaySet& rays,
+                                                   const PathParams& params) {
+    return std::make_unique<cuda::DeviceWindowBackend>(surface, rays, params);
+}
+}  // namespace freeform::gpu_test
+
+namespace {
+
 // for_each(exec::cuda) itself: every index exactly once for n far beyond one grid, the
 // same __host__ __device__ lambda on both sides, and launch errors as exceptions.
 void policy_checks() {
@@ -252,6 +263,12 @@ int main() {
         cuda::check(cudaStreamCreate(&stream), "cudaStreamCreate");
         policy_checks();
         for (Case& c : cases) gpu_checks(c, stream);
+        for (const Case& c : cases) {
+            const std::vector<std::string> differ = design_checks(c);
+            for (const std::string& d : differ) expect(false, d);
+            if (differ.empty())
+                std::printf("%-43s GPU design == CPU design (400 iterations, windows of 8)\n", c.name.c_str());
+        }
         cuda::check(cudaStreamDestroy(stream), "cudaStreamDestroy");
     } catch (const std::exception& e) {
         std::fprintf(stderr, "error: %s\n", e.what());

@@ -3,6 +3,7 @@
 // the host compiler, as the library's CPU build is) builds the scenes and traces them
 // with HeightfieldTracer; gpu_vs_cpu.cu traces them on the GPU and compares.
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -13,6 +14,7 @@
 #include <freeform/trace/path.hpp>
 #include <freeform/trace/tracer.hpp>
 #include <freeform/trace/index_kernel.hpp>
+#include <freeform/trace/window_backend.hpp>
 #include <freeform/trace/window_kernel.hpp>
 
 namespace freeform::gpu_test {
@@ -58,6 +60,16 @@ struct WindowReference {
     std::vector<CellCrossing> commit_cells;
 };
 WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves);
+
+// The device's window backend (cuda::DeviceWindowBackend), made by the CUDA half.
+std::unique_ptr<WindowBackend> make_device_backend(const Heightmap& surface, const RaySet& rays,
+                                                   const PathParams& params);
+
+// A short design of the case (annealing at fixed iterations, speculative windows of 8)
+// with its windows evaluated on the device, against the same design with its moves
+// evaluated one by one on the CPU: the same heights, energy and acceptances, bit for bit.
+// Returns what differed, a line each (none: equal).
+std::vector<std::string> design_checks(const Case& c);
 
 // A move in the middle of the surface, as the annealer proposes them.
 HeightOverlay bump_overlay(const Heightmap& hm);

@@ -3,8 +3,11 @@
 #include "gpu_vs_cpu.hpp"
 
 #include <cmath>
+#include <tuple>
 #include <utility>
 
+#include <freeform/anneal/annealer.hpp>
+#include <freeform/design/problem.hpp>
 #include <freeform/trace/heightfield.hpp>
 #include <freeform/trace/heightfield_kernel.hpp>
 #include <freeform/trace/setup.hpp>
@@ -126,6 +129,43 @@ WindowReference cpu_window(const Case& c, std::span<const HeightOverlay> moves) 
                  std::int64_t(single.rays.size()), records.data());
     r.after = evaluate_window(trace, after, moves.subspan(1));
     return r;
+}
+
+std::vector<std::string> design_checks(const Case& c) {
+    const int w = c.scene.receiver.width, h = c.scene.receiver.height;
+    ImageD image(h, w);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) image(y, x) = 1.0 + 0.8 * std::sin(0.7 * x) * std::cos(0.4 * y);
+    const auto run = [&](bool device) {
+        Heightmap surface = c.surface;
+        const PathParams pp = make_path_params(c.scene);
+        Penalties penalties;
+        penalties.add(HeightBoundTerm{}, 0.01);
+        penalties.add(SmoothnessTerm{}, 0.001);
+        ProposalSettings proposals;
+        proposals.bank = default_kernel_bank(5);
+        proposals.max_shift_cells = 3;
+        SurfaceProblem problem(surface, c.rays, pp, make_target(image, w, h, c.rays.total), {}, penalties, proposals,
+                               make_bandit(BanditKind::history, 7), 1e-4, 1.0);
+        if (device)
+            problem.set_window_evaluator(
+                std::make_unique<CopiedStateWindowEvaluator>(make_device_backend(surface, c.rays, pp)));
+        AnnealOptions o;
+        o.seed = 11;
+        o.max_iterations = 400;
+        o.speculative = device ? 8 : 1;
+        o.threads = 1;
+        o.adaptive_speculation = false;
+        const AnnealResult r = anneal(problem, o);
+        return std::make_tuple(r.accepted, r.final_energy, surface.heights());
+    };
+    const auto cpu = run(false), gpu = run(true);
+    std::vector<std::string> failures;
+    if (std::get<0>(cpu) == 0) failures.push_back(c.name + ": the design accepted no move");
+    if (std::get<0>(gpu) != std::get<0>(cpu)) failures.push_back(c.name + ": GPU design accepted other moves");
+    if (std::get<1>(gpu) != std::get<1>(cpu)) failures.push_back(c.name + ": GPU design's energy differs");
+    if (std::get<2>(gpu) != std::get<2>(cpu)) failures.push_back(c.name + ": GPU design's heights differ");
+    return failures;
 }
 
 std::vector<RayRecord> cpu_trace(const Case& c, std::span<const std::int32_t> ids, const HeightOverlay& o) {

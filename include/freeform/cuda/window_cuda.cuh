@@ -29,6 +29,7 @@
 
 #include "../core/exec.hpp"
 #include "../trace/index_kernel.hpp"
+#include "../trace/window_backend.hpp"
 #include "../trace/window_kernel.hpp"
 #include "exec_cuda.cuh"
 #include "trace_cuda.cuh"
@@ -230,6 +231,39 @@ private:
     std::vector<Fixed> host_values_;
     std::vector<WindowChange> changes_;
     std::size_t pairs_ = 0;
+};
+
+// A design's windows on the device: the WindowBackend (trace/window_backend.hpp) that
+// CopiedStateWindowEvaluator (trace/window.hpp) drives, so that SurfaceProblem's
+// speculative windows run here. It keeps its own device copy of the surface (a
+// DeviceHeightfieldTracer over the problem's heightmap and rays, which must outlive it),
+// updated with each committed move's heights and copied whole with the state.
+class DeviceWindowBackend final : public WindowBackend {
+public:
+    DeviceWindowBackend(const Heightmap& surface, const RaySet& rays, const PathParams& params,
+                        exec::cuda_t policy = {})
+        : tracer_(surface, rays, params), policy_(policy) {}
+
+    void upload_state(const IncrementalTrace&, const SlottedRayCellIndex& index,
+                      std::span<const RayRecord> records) override {
+        tracer_.surface_changed(tracer_.surface().full_patch());
+        window_.upload_state(index, records);
+    }
+    void surface_changed(const Patch& patch) override { tracer_.surface_changed(patch); }
+    void evaluate(const IncrementalTrace&, std::span<const HeightOverlay> moves, std::span<const WindowPatch> patches,
+                  std::span<const std::int32_t> slot_proposal, float pad) override {
+        window_.evaluate(policy_, tracer_, moves, patches, slot_proposal, pad);
+    }
+    const WindowChange& change(std::size_t p) const override { return window_.change(p); }
+    bool commit(std::span<const std::int32_t> rays, std::span<const RayRecord> records,
+                std::span<const std::int32_t> begin, std::span<const CellCrossing> crossings) override {
+        return window_.commit(policy_, rays, records, begin, crossings);
+    }
+
+private:
+    DeviceHeightfieldTracer tracer_;
+    DeviceWindowEvaluation window_;
+    exec::cuda_t policy_;
 };
 
 }  // namespace freeform::cuda

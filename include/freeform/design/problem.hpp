@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <type_traits>
@@ -193,8 +194,17 @@ public:
     // of delta() one by one. The deltas, and so the design, are the same bit for bit
     // (tests/test_incremental.cpp). Off by default: on the CPU it is slower (the accepted
     // move is retraced again to commit it). Only the height-field backend has it.
-    void set_window_evaluation(bool on) { window_evaluation_ = on && std::is_same_v<Backend, HeightfieldBackend>; }
-    bool window_evaluation() const { return window_evaluation_; }
+    void set_window_evaluation(bool on) {
+        if constexpr (std::is_same_v<Backend, HeightfieldBackend>)
+            set_window_evaluator(on ? std::make_unique<HostWindowEvaluator>(backend_.threads) : nullptr);
+    }
+    // The same with windows evaluated by `e` (a copy of the state kept apart, on a device
+    // say: cuda/window_cuda.cuh); null turns window evaluation off.
+    void set_window_evaluator(std::unique_ptr<WindowEvaluator> e) {
+        if constexpr (std::is_same_v<Backend, HeightfieldBackend>) evaluator_ = std::move(e);
+    }
+    bool window_evaluation() const { return evaluator_ != nullptr; }
+    WindowEvaluator* window_evaluator() const { return evaluator_.get(); }
 
     // The deltas of a window's moves, evaluated together: out[k] = delta(moves[k]).
     void delta_window(std::span<Move> moves, std::span<double> out) const
@@ -208,7 +218,7 @@ public:
             window_moves_[n++] = m.overlay;
         }
         const std::span<const HeightOverlay> changing(window_moves_.data(), n);
-        window_.evaluate(exec::omp_t{backend_.threads}, trace_, changing);
+        evaluator_->evaluate(trace_, changing);
         const std::int64_t cells = std::int64_t(image_.width()) * image_.height();
         std::size_t p = 0;
         for (std::size_t k = 0; k < moves.size(); ++k) {
@@ -217,7 +227,7 @@ public:
                 out[k] = delta(m);
                 continue;
             }
-            const WindowChange& w = window_.change(p++);
+            const WindowChange& w = evaluator_->change(p++);
             m.change.reset(rays_->size(), cells);
             for (std::size_t c = 0; c < w.cells.size(); ++c) m.change.histogram.add(w.cells[c], w.values[c]);
             m.change.status_delta = w.status_delta;
@@ -248,6 +258,7 @@ public:
         m.overlay.commit(*surface_);
         backend_.committed(m.overlay.patch);
         trace_.commit(m.change, pool);
+        if (evaluator_) evaluator_->committed(trace_, m.change, m.overlay.patch);
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
         value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
@@ -309,6 +320,7 @@ private:
             m.overlay.commit(*surface_);
             backend_.committed(m.overlay.patch);
             trace_.commit(m.change);
+            if (evaluator_) evaluator_->committed(trace_, m.change, m.overlay.patch);
             image_.apply(m.change.histogram, m.sums);
         }
         penalty_sum_ = penalties_->full(*surface_);
@@ -394,8 +406,7 @@ private:
     std::vector<float> best_heights_;
     double max_error_ = 0;
     int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
-    bool window_evaluation_ = false;
-    mutable WindowEvaluation window_;                  // scratch of delta_window
+    std::unique_ptr<WindowEvaluator> evaluator_;       // delta_window's, null: windows off
     mutable std::vector<HeightOverlay> window_moves_;  // its moves that change something
 };
 

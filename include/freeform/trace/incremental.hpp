@@ -364,6 +364,9 @@ public:
     const PathParams& params() const { return params_; }
     const std::vector<RayRecord>& records() const { return records_; }
     const RayCellIndex& index() const { return index_; }
+    // Counts the changes of the state (rebuilds and commits): a copy of the state kept
+    // elsewhere (a device's, trace/window.hpp) knows from it whether it is still current.
+    std::uint64_t version() const { return version_; }
     const std::array<Fixed, weight_slots>& weight_by_status() const { return status_weight_; }
     int receiver_width() const { return params_.receiver.width; }
     int receiver_height() const { return params_.receiver.height; }
@@ -374,6 +377,7 @@ public:
         const std::int64_t n = rays_->size();
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
+        ++version_;
         const int chunks = std::max(1, thread_count(policy));
         std::vector<std::vector<CellCrossing>> chunk_cells(static_cast<std::size_t>(chunks));
         std::vector<std::vector<std::int64_t>> chunk_begin(static_cast<std::size_t>(chunks));
@@ -445,6 +449,7 @@ public:
         const std::int64_t n = rays_->size();
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
+        ++version_;
         std::vector<CellCrossing> cells;
         for (std::int64_t k = 0; k < n; ++k) {
             cells.clear();
@@ -550,6 +555,7 @@ public:
     // one by one waited on the other core's cache for each (perf: a fifth of the caller's
     // time with two threads). The state is the same either way, lists included.
     void commit(const TraceChange& change, TaskPool* pool = nullptr) {
+        ++version_;
         const auto cells_of = [](const TracePart& part, std::size_t k) {
             return std::span(part.cells.data() + part.cell_begin[k],
                              std::size_t(part.cell_begin[k + 1] - part.cell_begin[k]));
@@ -901,6 +907,7 @@ private:
     RayCellIndex index_;
     std::array<Fixed, weight_slots> status_weight_{};
     std::vector<std::vector<std::size_t>> relisted_;  // commit(): per part, the rays whose cells changed
+    std::uint64_t version_ = 0;
 };
 
 }  // namespace freeform

@@ -14,6 +14,7 @@
 // where depends on the threads, what the lists hold does not). Only when a pool's spare
 // room runs out is the commit reported as failed; the caller then assigns the index again
 // from the host's, with room to spare.
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -226,35 +227,36 @@ struct SlottedRayCellIndex {
     // The index of `flat` with room to grow, each cell's rays sorted.
     void assign(const FlatRayCellIndex& flat) {
         row = flat.row;
-        const auto cells = std::size_t(flat.cells()), rays = std::size_t(flat.rays());
-        cell_begin.resize(cells), cell_count.resize(cells), cell_room.resize(cells);
-        cell_rays.clear();
-        for (std::size_t c = 0; c < cells; ++c) {
-            const std::int64_t b = flat.cell_begin[c], e = flat.cell_begin[c + 1];
-            cell_begin[c] = std::int64_t(cell_rays.size());
-            cell_count[c] = std::int32_t(e - b);
-            cell_room[c] = room(e - b, 8);
-            const auto first =
-                cell_rays.insert(cell_rays.end(), flat.cell_rays.begin() + b, flat.cell_rays.begin() + e);
-            std::sort(first, cell_rays.end());
-            cell_rays.resize(cell_rays.size() + std::size_t(cell_room[c] - (e - b)), -1);
-        }
-        ray_begin.resize(rays), ray_count.resize(rays), ray_room.resize(rays);
-        crossings.clear();
-        for (std::size_t r = 0; r < rays; ++r) {
-            const std::int64_t b = flat.ray_begin[r], e = flat.ray_begin[r + 1];
-            ray_begin[r] = std::int64_t(crossings.size());
-            ray_count[r] = std::int32_t(e - b);
-            ray_room[r] = room(e - b, 4);
-            crossings.insert(crossings.end(), flat.crossings.begin() + b, flat.crossings.begin() + e);
-            crossings.resize(crossings.size() + std::size_t(ray_room[r] - (e - b)), CellCrossing{-1});
-        }
+        lay_out(flat.cell_begin, flat.cell_rays, 8, std::int32_t(-1), cell_begin, cell_count, cell_room, cell_rays);
+        for (std::size_t c = 0; c < cell_begin.size(); ++c)
+            std::sort(cell_rays.begin() + cell_begin[c], cell_rays.begin() + cell_begin[c] + cell_count[c]);
+        lay_out(flat.ray_begin, flat.crossings, 4, CellCrossing{-1}, ray_begin, ray_count, ray_room, crossings);
+        const std::size_t cells = cell_begin.size();
         used = {cell_rays.size(), crossings.size()};
         cell_rays.resize(cell_rays.size() + spare(cell_rays.size()), -1);
         crossings.resize(crossings.size() + spare(crossings.size()), CellCrossing{-1});
         dirty_mark.assign(cells, 0), added.assign(cells, 0);
         dirty.resize(std::max<std::size_t>(cells, 1));
         dirty_count.assign(1, 0), overflow.assign(1, 0);
+    }
+
+    // Compressed rows (`in`, row k at [in_begin[k], in_begin[k + 1])) laid out in slots
+    // with room, the room filled with `fill`.
+    template <class T>
+    static void lay_out(const std::vector<std::int64_t>& in_begin, const std::vector<T>& in, int few, T fill,
+                        std::vector<std::int64_t>& begin, std::vector<std::int32_t>& count,
+                        std::vector<std::int32_t>& capacity, std::vector<T>& out) {
+        const std::size_t rows = in_begin.size() - 1;
+        begin.resize(rows), count.resize(rows), capacity.resize(rows);
+        out.clear();
+        for (std::size_t k = 0; k < rows; ++k) {
+            const std::int64_t b = in_begin[k], e = in_begin[k + 1];
+            begin[k] = std::int64_t(out.size());
+            count[k] = std::int32_t(e - b);
+            capacity[k] = room(e - b, few);
+            out.insert(out.end(), in.begin() + b, in.begin() + e);
+            out.resize(out.size() + std::size_t(capacity[k] - (e - b)), fill);
+        }
     }
 
     SlottedIndexView view() {

@@ -29,6 +29,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <numeric>
 #include <span>
 #include <vector>
@@ -36,6 +37,8 @@
 #include "../core/exec.hpp"
 #include "../surface/overlay.hpp"
 #include "incremental.hpp"
+#include "index_kernel.hpp"
+#include "window_backend.hpp"
 #include "window_kernel.hpp"
 
 namespace freeform {
@@ -188,12 +191,15 @@ public:
     // proposal's dense change with atomics (WindowDepositKernel), each proposal's touched
     // cells sorted, their values taken out (WindowGatherKernel). The same changes, each
     // proposal's cells in increasing order. Its scratch is proposals x receiver cells.
+    // `maintained`: the records the pairs' changes are taken against (default: the
+    // trace's; a copy kept with a slotted index, KernelWindowEvaluator's).
     template <HostPolicy P>
-    void sum_atomic(P policy, const IncrementalTrace& trace) {
+    void sum_atomic(P policy, const IncrementalTrace& trace, const RayRecord* maintained = nullptr) {
         const std::size_t n = changes_.size(), pairs = ray_.size();
         pair_changes_.resize(pairs);
         for_each(policy, std::int64_t(pairs),
-                 WindowAccountKernel{trace.params().receiver, ray_.data(), records_.data(), trace.records().data(),
+                 WindowAccountKernel{trace.params().receiver, ray_.data(), records_.data(),
+                                     maintained != nullptr ? maintained : trace.records().data(),
                                      trace.rays().weight.data(), pair_changes_.data()});
         const auto cells = std::int64_t(trace.receiver_width()) * trace.receiver_height();
         if (sums_.size() < n * std::size_t(cells)) {  // kept zero between windows (the gather clears what it reads)
@@ -250,6 +256,143 @@ private:
     std::vector<unsigned long long> listed_, status_, moved_;
     std::vector<std::int32_t> touched_, entry_proposal_, entry_cell_;
     std::vector<Fixed> entry_value_;
+};
+
+// A change's parts (a move evaluated on several threads is split, TraceChange::part)
+// joined into one list of rays, records and crossings, as the commit kernels read it.
+inline void pack_change(const TraceChange& change, std::vector<std::int32_t>& rays, std::vector<RayRecord>& records,
+                        std::vector<std::int32_t>& begin, std::vector<CellCrossing>& crossings) {
+    rays.clear(), records.clear(), begin.assign(1, 0), crossings.clear();
+    for (int p = 0; p < change.split; ++p) {
+        const TracePart& part = change.part(p);
+        rays.insert(rays.end(), part.rays.begin(), part.rays.end());
+        records.insert(records.end(), part.records.begin(), part.records.end());
+        for (std::size_t k = 0; k < part.rays.size(); ++k)
+            begin.push_back(std::int32_t(crossings.size()) + part.cell_begin[k + 1] - part.cell_begin[0]);
+        crossings.insert(crossings.end(), part.cells.begin() + part.cell_begin[0],
+                         part.cells.begin() + part.cell_begin[part.rays.size()]);
+    }
+}
+
+// What evaluates a design's speculative windows (SurfaceProblem::delta_window): the host
+// forms on the CPU (HostWindowEvaluator), or the kernel forms over a copy of the state kept
+// apart, on a device or here (CopiedStateWindowEvaluator over a WindowBackend). The copy
+// is kept current through the trace's version(): committed() is told of every commit the
+// problem makes, and any other change (a rebuild, new heights) shows as a version the
+// evaluator has not seen, on which the whole state is copied again.
+class WindowEvaluator {
+public:
+    virtual ~WindowEvaluator() = default;
+    // Evaluates `moves` against `trace`'s present state; change(p) afterwards.
+    virtual void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves) = 0;
+    virtual const WindowChange& change(std::size_t p) const = 0;
+    // `trace` has just committed `change`, a move whose heights changed in `heights`.
+    virtual void committed(const IncrementalTrace& trace, const TraceChange& change, const Patch& heights) = 0;
+};
+
+// The host forms (WindowEvaluation::evaluate) on `threads` OpenMP threads: they read the
+// trace itself, so there is no copy to keep.
+class HostWindowEvaluator final : public WindowEvaluator {
+public:
+    explicit HostWindowEvaluator(int threads) : threads_(threads) {}
+    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves) override {
+        window_.evaluate(exec::omp_t{threads_}, trace, moves);
+    }
+    const WindowChange& change(std::size_t p) const override { return window_.change(p); }
+    void committed(const IncrementalTrace&, const TraceChange&, const Patch&) override {}
+
+private:
+    int threads_;
+    WindowEvaluation window_;
+};
+
+// The evaluator over a WindowBackend (trace/window_backend.hpp): it plans each window on
+// the host (window_slots) and keeps the backend's copy current, by the commit kernels
+// after each commit, whole after anything else.
+class CopiedStateWindowEvaluator final : public WindowEvaluator {
+public:
+    explicit CopiedStateWindowEvaluator(std::unique_ptr<WindowBackend> backend) : backend_(std::move(backend)) {}
+
+    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves) override {
+        if (!current_ || version_ != trace.version()) copy_state(trace);
+        window_slots(trace, moves, patches_, slot_proposal_);
+        backend_->evaluate(trace, moves, patches_, slot_proposal_, pad_);
+    }
+    const WindowChange& change(std::size_t p) const override { return backend_->change(p); }
+
+    void committed(const IncrementalTrace& trace, const TraceChange& change, const Patch& heights) override {
+        if (!current_ || version_ + 1 != trace.version()) {
+            current_ = false;  // copied whole at the next evaluate()
+            return;
+        }
+        pack_change(change, rays_, records_, begin_, crossings_);
+        backend_->surface_changed(heights);
+        current_ = backend_->commit(rays_, records_, begin_, crossings_);
+        version_ = trace.version();
+        ++commits_;
+    }
+
+    std::int64_t copies() const { return copies_; }    // whole copies of the state made
+    std::int64_t commits() const { return commits_; }  // commits applied by the kernels
+    WindowBackend& backend() { return *backend_; }
+
+private:
+    void copy_state(const IncrementalTrace& trace) {
+        flatten(trace, flat_);
+        slotted_.assign(flat_);
+        pad_ = hf_detail::grid_of(trace.surface().view()).z_pad;
+        backend_->upload_state(trace, slotted_, trace.records());
+        version_ = trace.version();
+        current_ = true;
+        ++copies_;
+    }
+
+    std::unique_ptr<WindowBackend> backend_;
+    FlatRayCellIndex flat_;
+    SlottedRayCellIndex slotted_;
+    std::vector<WindowPatch> patches_;
+    std::vector<std::int32_t> slot_proposal_, rays_, begin_;
+    std::vector<RayRecord> records_;
+    std::vector<CellCrossing> crossings_;
+    float pad_ = 0;
+    std::uint64_t version_ = 0;
+    bool current_ = false;
+    std::int64_t copies_ = 0, commits_ = 0;
+};
+
+// The backend on the host: the kernel forms (select_flat, sum_atomic, the commit kernels)
+// under a host policy, over a slotted index and records of its own. What
+// cuda::DeviceWindowBackend does on a device, so that a whole design run on the CPU tests
+// the evaluator's bookkeeping (tests/test_incremental.cpp).
+template <HostPolicy P>
+class HostKernelWindowBackend final : public WindowBackend {
+public:
+    explicit HostKernelWindowBackend(P policy) : policy_(policy) {}
+
+    void upload_state(const IncrementalTrace&, const SlottedRayCellIndex& index,
+                      std::span<const RayRecord> records) override {
+        slotted_ = index;
+        records_.assign(records.begin(), records.end());
+    }
+    void surface_changed(const Patch&) override {}  // reads the host surface itself
+    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves, std::span<const WindowPatch>,
+                  std::span<const std::int32_t>, float) override {
+        window_.select_flat(policy_, trace, slotted_.view().selection(), moves);
+        window_.retrace(policy_, trace, moves);
+        window_.sum_atomic(policy_, trace, records_.data());
+    }
+    const WindowChange& change(std::size_t p) const override { return window_.change(p); }
+    bool commit(std::span<const std::int32_t> rays, std::span<const RayRecord> records,
+                std::span<const std::int32_t> begin, std::span<const CellCrossing> crossings) override {
+        return slotted_.commit(policy_, {rays.data(), records.data(), begin.data(), crossings.data()},
+                               std::int64_t(rays.size()), records_.data());
+    }
+
+private:
+    P policy_;
+    WindowEvaluation window_;
+    SlottedRayCellIndex slotted_;
+    std::vector<RayRecord> records_;
 };
 
 }  // namespace freeform
