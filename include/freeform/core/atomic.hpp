@@ -4,6 +4,7 @@
 // integer operations, whose result does not depend on the order threads arrive in
 // (fixed-point sums, claims, counters), so the kernels that use them stay deterministic.
 #include <atomic>
+#include <cstdint>
 
 #include "hd.hpp"
 
@@ -33,6 +34,23 @@ FREEFORM_HD inline unsigned int atomic_fetch_add(unsigned int* p, unsigned int v
     return atomicAdd(p, v);
 #else
     return std::atomic_ref<unsigned int>(*p).fetch_add(v, std::memory_order_relaxed);
+#endif
+}
+
+// A plain load and store of an int that other threads may store to at the same time
+// (relaxed: no ordering, only no torn or racing access).
+FREEFORM_HD inline std::int32_t atomic_load(std::int32_t* p) {
+#if defined(__CUDA_ARCH__)
+    return *static_cast<volatile std::int32_t*>(p);
+#else
+    return std::atomic_ref<std::int32_t>(*p).load(std::memory_order_relaxed);
+#endif
+}
+FREEFORM_HD inline void atomic_store(std::int32_t* p, std::int32_t v) {
+#if defined(__CUDA_ARCH__)
+    *static_cast<volatile std::int32_t*>(p) = v;
+#else
+    std::atomic_ref<std::int32_t>(*p).store(v, std::memory_order_relaxed);
 #endif
 }
 

@@ -95,8 +95,9 @@ struct IndexUnlistKernel {
             const std::int32_t cell = index.crossings[j].cell;
             if (index_detail::has_cell(change.crossings, nb, ne, cell)) continue;
             std::int32_t* list = index.cell_rays + index.cell_begin[cell];
+            // Other threads mark their own rays' entries in the same list meanwhile.
             for (std::int32_t e = 0; e < index.cell_count[cell]; ++e)
-                if (list[e] == r) list[e] = -1;
+                if (atomic_load(list + e) == r) atomic_store(list + e, -1);
             dirty(cell);
         }
         for (std::int64_t j = nb; j < ne; ++j) {
