@@ -115,17 +115,25 @@ public:
     template <HostPolicy P>
     void select_flat(P policy, const IncrementalTrace& trace, const RayCellIndexView& index,
                      std::span<const HeightOverlay> moves) {
-        const std::size_t n = moves.size();
         window_slots(trace, moves, patches_, slot_proposal_);
-        const auto slots = std::int64_t(slot_proposal_.size());
+        select_flat(policy, trace, index, moves, patches_, slot_proposal_);
+    }
+    // The same with the window's slots already planned (window_slots), as
+    // CopiedStateWindowEvaluator plans them for any backend.
+    template <HostPolicy P>
+    void select_flat(P policy, const IncrementalTrace& trace, const RayCellIndexView& index,
+                     std::span<const HeightOverlay> moves, std::span<const WindowPatch> patches,
+                     std::span<const std::int32_t> slot_proposal) {
+        const std::size_t n = moves.size();
+        const auto slots = std::int64_t(slot_proposal.size());
         overlay_views(trace.surface(), moves, views_);
         const HeightfieldView base = trace.surface().view();
-        reach_.resize(slot_proposal_.size());
+        reach_.resize(slot_proposal.size());
         for_each(policy, slots,
-                 WindowReachKernel<OverlayView>{base, views_.data(), patches_.data(), slot_proposal_.data(),
+                 WindowReachKernel<OverlayView>{base, views_.data(), patches.data(), slot_proposal.data(),
                                                 hf_detail::grid_of(base).z_pad, reach_.data()});
-        WindowSelectKernel select{index, patches_.data(), slot_proposal_.data(), reach_.data()};
-        slot_count_.resize(slot_proposal_.size() + 1);
+        WindowSelectKernel select{index, patches.data(), slot_proposal.data(), reach_.data()};
+        slot_count_.resize(slot_proposal.size() + 1);
         select.count = slot_count_.data();
         for_each(policy, slots, select);
         // The places: an exclusive scan of the counts (one more entry: the total).
@@ -139,7 +147,7 @@ public:
         select.ray = ray_.data();
         for_each(policy, slots, select);
         begin_.resize(n + 1);
-        for (std::size_t p = 0; p < n; ++p) begin_[p] = std::size_t(slot_count_[std::size_t(patches_[p].slot)]);
+        for (std::size_t p = 0; p < n; ++p) begin_[p] = std::size_t(slot_count_[std::size_t(patches[p].slot)]);
         begin_[n] = pairs;
         records_.resize(pairs);
         changes_.resize(n);
@@ -375,9 +383,9 @@ public:
         records_.assign(records.begin(), records.end());
     }
     void surface_changed(const Patch&) override {}  // reads the host surface itself
-    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves, std::span<const WindowPatch>,
-                  std::span<const std::int32_t>, float) override {
-        window_.select_flat(policy_, trace, slotted_.view().selection(), moves);
+    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves,
+                  std::span<const WindowPatch> patches, std::span<const std::int32_t> slot_proposal, float) override {
+        window_.select_flat(policy_, trace, slotted_.view().selection(), moves, patches, slot_proposal);
         window_.retrace(policy_, trace, moves);
         window_.sum_atomic(policy_, trace, records_.data());
     }
