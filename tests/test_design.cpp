@@ -593,6 +593,101 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
     }
 }
 
+// A device's backend stood in for by the host's kernel forms, counting what the design
+// asked of it (a device is not needed to test what the designer does with one).
+class CountingWindowBackend final : public WindowBackend {
+public:
+    explicit CountingWindowBackend(std::int64_t& windows) : windows_(windows) {}
+    void upload_state(const IncrementalTrace& trace, const SlottedRayCellIndex& index,
+                      std::span<const RayRecord> records) override {
+        inner_.upload_state(trace, index, records);
+    }
+    void surface_changed(const Patch& patch) override { inner_.surface_changed(patch); }
+    void evaluate(const IncrementalTrace& trace, std::span<const HeightOverlay> moves,
+                  std::span<const WindowPatch> patches, std::span<const std::int32_t> slot_proposal,
+                  float pad) override {
+        ++windows_;
+        inner_.evaluate(trace, moves, patches, slot_proposal, pad);
+    }
+    const WindowChange& change(std::size_t p) const override { return inner_.change(p); }
+    bool commit(std::span<const std::int32_t> rays, std::span<const RayRecord> records,
+                std::span<const std::int32_t> begin, std::span<const CellCrossing> crossings) override {
+        return inner_.commit(rays, records, begin, crossings);
+    }
+
+private:
+    HostKernelWindowBackend<exec::seq_t> inner_{exec::seq_t{}};
+    std::int64_t& windows_;
+};
+
+// optimise.device "cuda" through DesignSetup::cuda: the designer hands every stage's
+// speculative windows to the offered backend, and the design is the CPU's bit for bit
+// (the property a GPU design must keep, tests/cuda/gpu_vs_cpu.cu, here in every build).
+TEST_CASE("a design whose windows run on an offered device is the CPU design bit for bit") {
+    SmallCase c = small_case();
+    c.scene.target = TargetSpec{};  // a transport start, as `freeform design` makes
+    DesignSetup quick;
+    quick.export_checks = false;
+    const CompletedDesign cpu = design(DesignJob{c.scene, c.options}, c.target, quick);
+    CHECK(cpu.result.device == "cpu");
+
+    std::int64_t backends = 0, windows = 0;
+    DeviceOffer offer;
+    offer.name = "host kernels";
+    offer.window = 6;
+    offer.make = [&](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
+        ++backends;
+        return std::make_unique<CountingWindowBackend>(windows);
+    };
+    for (const Device asked : {Device::cuda, Device::automatic})
+        for (const int threads : {1, 2}) {
+            CAPTURE(to_string(asked));
+            CAPTURE(threads);
+            DesignOptions o = c.options;
+            o.device = asked;
+            o.threads = threads;
+            DesignSetup setup = quick;
+            setup.cuda = offer;
+            backends = windows = 0;
+            const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
+            check_identical(cpu.result, d.result);
+            CHECK(d.result.device == "cuda (host kernels)");
+            CHECK(backends == std::int64_t(d.result.stages.size()));  // one per stage
+            CHECK(windows > 0);
+        }
+
+    SUBCASE("a device asked for but not offered, or unusable, is refused naming the key; auto takes the CPU") {
+        DesignOptions o = c.options;
+        o.device = Device::cuda;
+        DesignSetup setup = quick;
+        const auto refusal = [&] {
+            try {
+                design(DesignJob{c.scene, o}, c.target, setup);
+            } catch (const InputError& e) {
+                return std::string(e.what());
+            }
+            return std::string("no error");
+        };
+        CHECK(refusal().starts_with("optimise.device: \"cuda\" asked for, but the program running this design offers "
+                                    "no CUDA device"));
+        DeviceOffer none;
+        none.unavailable = "no CUDA device on this machine";
+        setup.cuda = none;
+        CHECK(refusal() == "optimise.device: \"cuda\" asked for, but no CUDA device on this machine");
+        setup.cuda = offer;
+        o.evaluation = EvaluationMode::full;
+        CHECK(refusal().find("optimise.evaluation \"full\"") != std::string::npos);
+        o.evaluation = EvaluationMode::incremental;
+        o.device = Device::automatic;
+        setup.cuda = none;
+        backends = 0;
+        const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
+        CHECK(d.result.device == "cpu");
+        CHECK(backends == 0);
+        check_identical(cpu.result, d.result);
+    }
+}
+
 // With max_iterations below the plan's budget, every level still gets its share (the
 // cap is spread in proportion to the levels' time shares) and the result is complete.
 TEST_CASE("max_iterations below the plan's budget still runs every level and fills the result") {

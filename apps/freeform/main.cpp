@@ -2,7 +2,7 @@
 //
 //   freeform render SCENE.json --out DIR [--heightmap H.pfm | --mesh M.obj [--material refractive:N] [--mesh-normals]]
 //                   [--tracer T] [--threads N]
-//   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--quiet]
+//   freeform design SCENE.json --out DIR [--seed N] [--time-budget S] [--threads N] [--device D] [--quiet]
 //   freeform export SCENE.json --heightmap H.pfm --format step|sag|stl|obj --out FILE [--no-check]
 //
 // Built with MPI (CMake finds it) the same source also makes `freeform_mpi`: run under
@@ -40,6 +40,8 @@
 #include <freeform/io/forms.hpp>
 #include <freeform/io/outputs.hpp>
 #include <freeform/io/scene_json.hpp>
+
+#include "device/offer.hpp"
 #if defined(FREEFORM_WITH_MPI)
 #include <cstdlib>
 
@@ -350,6 +352,7 @@ struct DesignArgs {
     std::optional<std::int64_t> seed;
     std::optional<double> time_budget;
     std::optional<int> threads;
+    std::optional<std::string> device;  // cpu, cuda or auto (optimise.device)
     bool quiet = false;
     bool start_only = false;
     std::string replica_mode = "domains";  // freeform_mpi only
@@ -508,6 +511,7 @@ DesignJob design_job(const DesignArgs& a, const Limits& limits) {
         o.time_budget = *a.time_budget;
     }
     if (a.threads) o.threads = *a.threads;
+    if (a.device) o.device = *enum_value(*a.device, device_names);  // CLI11 checked the name
     try {
         check_designable(job.scene);  // before any work (the target image is loaded next)
     } catch (const InputError& e) {
@@ -522,8 +526,9 @@ DesignJob design_job(const DesignArgs& a, const Limits& limits) {
 class DesignMonitor {
 public:
     // `plan`: read here (its line is made now; the plan itself goes on to the design).
-    DesignMonitor(const DesignArgs& a, const PlannedDesign& plan)
-        : header_line_(header_line(a, plan)), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
+    // `device`: where the windows run, when not on the CPU (its name).
+    DesignMonitor(const DesignArgs& a, const PlannedDesign& plan, const DeviceOffer* device)
+        : header_line_(header_line(a, plan) + (device ? ", on " + device->name : std::string())), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
 
     bool quiet() const { return quiet_; }
     StatusLine& status() { return status_; }
@@ -630,6 +635,12 @@ int run_design(const DesignArgs& a) {
     const Limits limits = parse_limits(a.limits);
     const DesignJob job = design_job(a, limits);
     const Scene& scene = job.scene;
+    // The device: one asked for but not there is an input error (exit 2), before any work.
+    DesignSetup setup;
+    if (job.options.device != Device::cpu && !a.start_only) {
+        setup.cuda = cli::cuda_offer();
+        choose_device(job.options, setup.cuda, a.device ? "--device" : "optimise.device");
+    }
     check_output_dir(a.out, design_outputs);
     // Planned once: the memory check (before any surface is made), the header line, the
     // start surface's mesh and the design read the same levels.
@@ -640,11 +651,10 @@ int run_design(const DesignArgs& a) {
     const std::vector<ExportFormat> formats = io::export_formats(job.options.exports);
     std::optional<Heightmap> start = io::load_start_surface(scene, levels, limits);
     PlannedDesign plan = plan_design(job, std::move(start), std::move(levels));
-    DesignSetup setup;
     setup.start_only = a.start_only;
 
     std::signal(SIGINT, on_sigint);
-    DesignMonitor monitor(a, plan);
+    DesignMonitor monitor(a, plan, a.start_only ? nullptr : choose_device(plan.options, setup.cuda));
     setup.callbacks = monitor.callbacks();
     DesignRun run = design_run(a, std::move(plan), target, std::move(setup), monitor);
     // Another MPI rank: rank 0 writes the winner's design.
@@ -860,6 +870,10 @@ CLI::App* add_design_command(CLI::App& app, DesignArgs& da) {
                                ? "worker threads per rank (0 = the cores mpirun bound the rank to)"
                                : "worker threads (0 = all cores)")
         ->check(CLI::Range(0, 65536));
+    design_cmd->add_option("--device", da.device,
+                           "where moves are judged: cpu, cuda (a GPU; needs a build with CUDA) or auto (the GPU when "
+                           "there is one); default: the scene's optimise.device (docs/cuda.md)")
+        ->check(CLI::IsMember({"cpu", "cuda", "auto"}));
     design_cmd->add_flag("--quiet", da.quiet, "no live progress line");
     design_cmd->add_option("--limit", da.limits, limit_help)->allow_extra_args(false);
     design_cmd->add_flag("--start-only", da.start_only,

@@ -13,8 +13,14 @@
 # 2. trace_bench on the letter E's final level and on a 512² photograph (the camera
 #    example's target at 512²): full traces on 2 CPU threads, on every CPU thread and on
 #    the GPU, and one move's retrace; histograms and records compared bit for bit.
-# Writes OUT_DIR/gpu_vs_cpu.log, OUT_DIR/trace_bench.json and OUT_DIR/trace_bench.log.
-# About 3 minutes on an H200 machine (16 cores), most of it compiling.
+# 3. design_bench (benchmarks/gpu/design_bench.cpp with the command line's device,
+#    apps/freeform/device/cuda.cu): the letter E designed for a fixed 20,000 iterations
+#    on 2 CPU threads and with its windows on the GPU (speeds; heights bit for bit), then
+#    for 40 s on the CPU and 10 s on the GPU (fitted errors). DESIGN_BENCH=0 skips it.
+# Writes OUT_DIR/gpu_vs_cpu.log, OUT_DIR/trace_bench.json, OUT_DIR/trace_bench.log,
+# OUT_DIR/design_bench.json and OUT_DIR/design_bench.log.
+# About 3 minutes on an H200 machine (16 cores) for steps 1 and 2, most of it compiling;
+# step 3 about 3 more (not yet run on a device).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 out=${1:-${OUT:-$root/benchmarks/results/gpu}}
@@ -64,4 +70,17 @@ wait "$stb"
 "$nvcc" -ccbin g++ -Xcompiler -fopenmp "$work/bench.o" "$work/host.o" "$work/stb.o" -o "$work/trace_bench"
 (cd "$root" && "$work/trace_bench" "$out/trace_bench.json" --repeats 5 examples/scenes/letter-e.json \
     examples/scenes/camera.json@512) 2>&1 | tee "$out/trace_bench.log"
+if [ "${DESIGN_BENCH:-1}" != 0 ]; then
+    echo "== 3. design_bench"
+    g++ "${flags[@]}" -O2 -ffp-contract=off -fopenmp -c "$root/benchmarks/gpu/design_bench.cpp" \
+        -o "$work/design_host.o" &
+    host=$!
+    "$nvcc" "${flags[@]}" --extended-lambda --fmad=false -arch=native -diag-suppress 20012,20015 -ccbin g++ \
+        -x cu -c "$root/apps/freeform/device/cuda.cu" -o "$work/device.o"
+    wait "$host"
+    "$nvcc" -ccbin g++ -Xcompiler -fopenmp "$work/design_host.o" "$work/device.o" "$work/stb.o" \
+        -o "$work/design_bench"
+    (cd "$root" && "$work/design_bench" "$out/design_bench.json" examples/scenes/letter-e.json --iterations 20000 \
+        --threads 2 --gpu-seconds 10 --cpu-seconds 40) 2>&1 | tee "$out/design_bench.log"
+fi
 echo "run.sh: results in $out"

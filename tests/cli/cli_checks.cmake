@@ -186,6 +186,10 @@ if(GROUP STREQUAL "errors")
     design "${DATA}/start-level-bad.json" --out out-start-level-bad)
   expect_input_error(design-zero-time-budget "--time-budget"
     design "${DATA}/design-tiny.json" --time-budget 0 --out out-design-zero-time-budget)
+  expect_input_error(device-bad-key "optimise.device"
+    design "${DATA}/device-bad.json" --out out-device-bad-key)
+  expect_input_error(device-bad-option "--device"
+    design "${DATA}/design-tiny.json" --device gpu --out out-device-bad-option)
 
   # An existing output directory is left as it was.
   file(MAKE_DIRECTORY "${WORK}/existing")
@@ -423,6 +427,38 @@ elseif(GROUP STREQUAL "design")
       fail("design: ${f} differs between --threads 1 and --threads 2")
     endif()
   endforeach()
+
+  # --device cuda: a design on the GPU where this build has CUDA and the machine a device,
+  # the same surface as the CPU's (docs/cuda.md); otherwise exit 2 with one line that says
+  # why, and nothing written. --device auto designs in either case, on the CPU without a
+  # device, and metrics.json says where.
+  # expect_device_design(<dir> <device regex>): the design in <dir> ran where the regex
+  # says and made design1's heightmap bit for bit.
+  function(expect_device_design dir pattern)
+    file(READ "${WORK}/${dir}/metrics.json" metrics)
+    string(JSON where GET "${metrics}" device)
+    execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files "${WORK}/design1/heightmap.pfm"
+                    "${WORK}/${dir}/heightmap.pfm" RESULT_VARIABLE different)
+    if(NOT where MATCHES "${pattern}" OR different)
+      fail("${dir}: device '${where}', heightmap differs from the CPU's: ${different}")
+    endif()
+  endfunction()
+  run(device-cuda design "${DATA}/design-tiny.json" --out out-device-cuda --device cuda --threads 1 --quiet)
+  if(rc STREQUAL "2")
+    if(NOT err MATCHES "^freeform: --device: \"cuda\" asked for, but [^\n]+\n$" OR EXISTS "${WORK}/out-device-cuda")
+      fail("design --device cuda without a device: expected one line naming --device and no output, got '${err}'")
+    endif()
+  elseif(rc STREQUAL "0")
+    expect_device_design(out-device-cuda "^cuda \\(")
+  else()
+    fail("design --device cuda: exit code ${rc}: ${err}")
+  endif()
+  run(device-auto design "${DATA}/design-tiny.json" --out device-auto --device auto --threads 1 --quiet)
+  if(NOT rc STREQUAL "0")
+    fail("design --device auto: exit code ${rc}: ${err}")
+  else()
+    expect_device_design(device-auto "^(cpu|cuda \\(.*\\))$")
+  endif()
 
   # The designed heightmap renders again through --heightmap to the error it reported.
   run(render-design render "${DATA}/design-tiny.json" --heightmap "${WORK}/design1/heightmap.pfm" --out rerender)

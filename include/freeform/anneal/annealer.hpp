@@ -569,16 +569,25 @@ private:
         return rng.uniform() < std::exp(-delta / temperature);
     }
 
-    void evaluate(int count) {
+    // Whether the problem evaluates a window's moves together (design/problem.hpp,
+    // trace/window.hpp; on a device, say), whatever the annealer's thread count.
+    bool windows_together() const {
         const Problem& cp = problem_;
-        proposals_evaluated_ += count;
-        // A problem that evaluates a window's moves together (design/problem.hpp,
-        // trace/window.hpp) gets them all at once: the same deltas bit for bit.
         if constexpr (requires(std::span<typename Problem::Move> m, std::span<double> d) {
                           cp.delta_window(m, d);
                           { cp.window_evaluation() } -> std::convertible_to<bool>;
-                      }) {
-            if (count > 1 && cp.window_evaluation()) {
+                      })
+            return cp.window_evaluation();
+        return false;
+    }
+
+    void evaluate(int count) {
+        const Problem& cp = problem_;
+        proposals_evaluated_ += count;
+        // A problem that evaluates a window's moves together gets them all at once: the
+        // same deltas bit for bit.
+        if constexpr (requires(std::span<typename Problem::Move> m, std::span<double> d) { cp.delta_window(m, d); }) {
+            if (count > 1 && windows_together()) {
                 cp.delta_window(std::span(moves_).first(std::size_t(count)),
                                 std::span(deltas_).first(std::size_t(count)));
                 return;
@@ -617,9 +626,11 @@ private:
     // Speculation pays only when a delta costs much more than waking the other threads,
     // and not at all when the machine has no idle core for them. Since the trajectory is
     // the same for every window size, the run measures both and keeps the faster: it
-    // probes serial windows now and then and compares iterations per second.
+    // probes serial windows now and then and compares iterations per second. One thread
+    // has nothing to speculate with, unless the problem evaluates windows on its own.
     void adapt_window(std::int64_t iterations, double seconds) {
-        if (!options_.adaptive_speculation || options_.speculative <= 1 || options_.threads == 1) {
+        if (!options_.adaptive_speculation || options_.speculative <= 1 ||
+            (options_.threads == 1 && !windows_together())) {
             parallel_mode_ = options_.speculative > 1 && !options_.adaptive_speculation;
             return;
         }

@@ -30,6 +30,7 @@
 #include "../surface/refine.hpp"
 #include "../surface/tool.hpp"
 #include "../trace/setup.hpp"
+#include "device.hpp"
 #include "held_out.hpp"
 #include "options.hpp"
 #include "problem.hpp"
@@ -96,6 +97,9 @@ struct DesignResult {
     // it was not fitted to; held_out.total < 0 when the checks are off.
     ObjectiveValue held_out{-1, -1, -1, -1, -1};
     std::uint64_t held_out_seed = 0;  // the seed of those rays (generate_rays)
+    // Where the annealing's windows were judged: "cpu", or "cuda (<device name>)"
+    // (optimise.device; design/device.hpp).
+    std::string device = "cpu";
 };
 
 // Kernel supports of level k (reference §4.4, multi-level Gaussian kernels). The first
@@ -532,8 +536,8 @@ struct DesignState {
     using replicas_type = Replicas;
 
     DesignState(const Scene& s, const ImageD& target, const DesignOptions& o, Callback& c, const Penalties& p,
-                Replicas& r)
-        : scene(s), target_image(target), options(o), callback(c), penalties(p), replicas(r),
+                Replicas& r, const DeviceOffer* dev)
+        : scene(s), target_image(target), options(o), callback(c), penalties(p), replicas(r), device(dev),
           timed(o.time_budget > 0 && o.max_iterations == 0),
           weights(o.objective) {}
 
@@ -543,6 +547,8 @@ struct DesignState {
     Callback& callback;
     const Penalties& penalties;
     Replicas& replicas;
+    // The device the stages' windows run on (design/device.hpp); null: the CPU.
+    const DeviceOffer* device;
     // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
     // may then depend on measured time (see calibrate()). Otherwise the run is timed: its
     // calibrations are cut short by slow moves and its stages' budgets fit the speed.
@@ -737,6 +743,27 @@ std::int64_t stage_budget(const State& d, const LevelSetup& L, std::size_t si, d
     return d.replicas.common_budget(budget);
 }
 
+// Proposals per speculative window when optimise.speculative leaves it open: one per
+// thread on the CPU, the device's own count on a device.
+template <class State>
+int stage_window(const State& d) {
+    if (!d.device) return d.threads;
+    return d.device->window > 0 ? d.device->window : default_device_window;
+}
+
+// The stage's windows on the design's device, if it has one: the device's backend over
+// the stage's surface and rays, kept current by CopiedStateWindowEvaluator
+// (trace/window.hpp). Only the height-field backend judges windows.
+template <class Backend, class State>
+void use_device(const State& d, const LevelSetup& L, BasicSurfaceProblem<Backend>& problem) {
+    if constexpr (std::is_same_v<Backend, HeightfieldBackend>) {
+        if (!d.device) return;
+        const TraceSetup& t = L.trace_setup;
+        problem.set_window_evaluator(
+            std::make_unique<CopiedStateWindowEvaluator>(d.device->make(d.surface, t.rays, t.params)));
+    }
+}
+
 // The annealer's options for stage si of level L, from initial temperature t0, the
 // calibration's speed and the stage's time.
 template <class State>
@@ -747,7 +774,7 @@ AnnealOptions stage_options(const State& d, const LevelSetup& L, std::size_t si,
     ao.seed = d.replicas.anneal_seed(stage_seed);
     ao.initial_temperature = t0;
     ao.cooling = o.schedule.cooling;
-    const int speculative = o.speculative > 0 ? o.speculative : d.threads;
+    const int speculative = o.speculative > 0 ? o.speculative : stage_window(d);
     const std::int64_t budget = stage_budget(d, L, si, moves_per_second, stage_time, speculative);
     ao.max_iterations = budget;
     ao.iterations_per_temperature = std::max<std::int64_t>(1, budget / std::max(1, o.schedule.temperature_steps));
@@ -889,6 +916,7 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     const int arms = std::max<int>(1, int(ps.bank.size()));
     const ProposalOptions& prop = d.options.proposals;
     auto problem = make_problem<Backend>(d, L, ps, make_bandit(prop.bandit, arms, prop.bandit_sync));
+    use_device(d, L, problem);
     const Calibration cal = calibrate(problem, stage_seed, d.moves.schedule.initial_acceptance, d.timed);
     // Identity for one replica.
     const double t0 = d.replicas.common_temperature(cal.temperature * d.options.schedule.initial_temperature_scale);
@@ -955,9 +983,13 @@ class Designer {
   public:
     // `planned`: plan_levels of the scene with these options, when the caller has them
     // (plan_design); null: planned here.
+    // `device`: where the stages' windows run (null: the CPU).
     Designer(const Scene& scene, const ImageD& target_image, const DesignOptions& options, Callback& callback,
-             const Penalties& penalties, Replicas& replicas, const std::vector<LevelPlan>* planned = nullptr)
-        : d_(scene, target_image, options, callback, penalties, replicas), planned_(planned) {}
+             const Penalties& penalties, Replicas& replicas, const std::vector<LevelPlan>* planned = nullptr,
+             const DeviceOffer* device = nullptr)
+        : d_(scene, target_image, options, callback, penalties, replicas, device), planned_(planned) {
+        if (device) d_.result.device = "cuda (" + device->name + ")";
+    }
 
     DesignResult run(Heightmap initial) {
         schedule(std::move(initial));
@@ -1041,9 +1073,9 @@ class Designer {
 template <class Backend, class Callback, class Replicas>
 DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& target_image,
                          const DesignOptions& options, Callback&& callback, const Penalties& penalties,
-                         Replicas& replicas, const std::vector<LevelPlan>* planned) {
+                         Replicas& replicas, const std::vector<LevelPlan>* planned, const DeviceOffer* device) {
     Designer<Backend, Callback, Replicas> designer(scene, target_image, options, callback, penalties, replicas,
-                                                   planned);
+                                                   planned, device);
     return designer.run(std::move(initial));
 }
 
@@ -1059,18 +1091,20 @@ DesignResult design_with(const Scene& scene, Heightmap initial, const ImageD& ta
 // `replicas` makes this design one replica of several (replicas.hpp); SingleReplica, the
 // default, is the plain design. `planned`, when given, is plan_levels(scene, options)
 // (PlannedDesign::levels): the levels are then not
-// planned again; options.levels, when set, still replaces them.
+// planned again; options.levels, when set, still replaces them. `device`, when given,
+// judges the stages' speculative windows (design/device.hpp; choose_device in
+// pipeline.hpp picks it from optimise.device); only incremental evaluation uses it.
 template <class Callback, ReplicaCoordinator Replicas>
 DesignResult design(const Scene& scene, Heightmap initial, const ImageD& target_image, const DesignOptions& options,
                     Callback&& callback, const Penalties& penalties, Replicas& replicas,
-                    const std::vector<LevelPlan>* planned = nullptr) {
+                    const std::vector<LevelPlan>* planned = nullptr, const DeviceOffer* device = nullptr) {
     if (options.evaluation == EvaluationMode::full)
         return design_detail::design_with<FullRetraceBackend>(scene, std::move(initial), target_image, options,
                                                               std::forward<Callback>(callback), penalties, replicas,
-                                                              planned);
+                                                              planned, nullptr);
     return design_detail::design_with<HeightfieldBackend>(scene, std::move(initial), target_image, options,
                                                           std::forward<Callback>(callback), penalties, replicas,
-                                                          planned);
+                                                          planned, device);
 }
 
 template <class Callback>

@@ -37,6 +37,16 @@ inline constexpr std::array<EnumName<EvaluationMode>, 2> evaluation_names{
     {{"incremental", EvaluationMode::incremental}, {"full", EvaluationMode::full}}};
 inline std::string_view to_string(EvaluationMode e) { return enum_name(e, evaluation_names); }
 
+// Where a design's moves are judged (docs/cuda.md): on the CPU, or in speculative
+// windows on a CUDA device that the program running the design offers (DesignSetup::cuda,
+// design/device.hpp; the command line does in a build with CUDA). "auto": the device when
+// one is offered and usable, the CPU otherwise. The design is the same bit for bit on
+// either at fixed iterations; a timed design differs only in how many iterations fit.
+enum class Device { cpu, cuda, automatic };
+inline constexpr std::array<EnumName<Device>, 3> device_names{
+    {{"cpu", Device::cpu}, {"cuda", Device::cuda}, {"auto", Device::automatic}}};
+inline std::string_view to_string(Device d) { return enum_name(d, device_names); }
+
 // The forms a design's surface is exported in (docs/export.md): the milled facets
 // (surface.obj/.stl), the smooth B-spline part (surface.step, builds with Open CASCADE)
 // and the grid sag table of the height map's vertices (surface.dat).
@@ -71,6 +81,8 @@ struct DesignOptions {
                                          // final mesh (design/designer.hpp, fitting_rays_per_cell); 0: off
     bool held_out_checks = true;      // judge stages with held-out rays (design/held_out.hpp)
     EvaluationMode evaluation = EvaluationMode::incremental;
+    // "cpu" by default until a device has measured the GPU path (docs/cuda.md, status).
+    Device device = Device::cpu;
     std::int64_t progress_every = 2000;  // iterations between progress reports
 
     ObjectiveWeights objective{};  // objective/objective.hpp

@@ -38,6 +38,7 @@
 #include "../trace/setup.hpp"
 #include "cell_means.hpp"
 #include "designer.hpp"
+#include "device.hpp"
 #include "fabrication.hpp"
 #include "initial.hpp"
 #include "machining.hpp"
@@ -252,7 +253,32 @@ struct DesignSetup {
     // and needs neither the part nor its figures, such as the study (benchmarks/study).
     // Smoothing, the tool's cut and the fitted and held-out traces still run.
     bool export_checks = true;
+    // The CUDA device this program can offer for optimise.device "cuda" or "auto"
+    // (design/device.hpp): the command line's in a build with CUDA. Empty: none, and a
+    // job that asks for "cuda" is refused (choose_device).
+    std::optional<DeviceOffer> cuda;
 };
+
+// The device a job's windows run on: null for the CPU, or the offered device.
+// optimise.device "cuda" with no usable device offered, or with full retraces, throws an
+// InputError that names `key` ("optimise.device"; the command line's "--device" when it
+// set the value); "auto" then quietly takes the CPU. Cheap: call it before any work.
+inline const DeviceOffer* choose_device(const DesignOptions& options, const std::optional<DeviceOffer>& offer,
+                                        const std::string& key = "optimise.device") {
+    if (options.device == Device::cpu) return nullptr;
+    const bool usable = offer && offer->usable();
+    if (options.device == Device::automatic)
+        return usable && options.evaluation == EvaluationMode::incremental ? &*offer : nullptr;
+    if (!usable)
+        throw InputError(key + ": \"cuda\" asked for, but " +
+                         (!offer ? std::string("the program running this design offers no CUDA device (the "
+                                               "freeform command line does when built with CUDA; docs/cuda.md)")
+                                 : offer->unavailable.empty() ? std::string("the offered device cannot make a backend")
+                                                              : offer->unavailable));
+    if (options.evaluation != EvaluationMode::incremental)
+        throw InputError(key + ": \"cuda\" judges moves incrementally; optimise.evaluation \"full\" runs on the CPU only");
+    return &*offer;
+}
 
 namespace pipeline_detail {
 
@@ -280,7 +306,7 @@ DesignResult anneal(PlannedDesign& plan, const ImageD& target, const DesignSetup
     return freeform::design(plan.scene, std::move(plan.initial), target, options, progress,
                             setup.penalties ? *setup.penalties
                                             : default_penalties(options.penalties, plan.scene.surface.tool_radius),
-                            replicas, &plan.levels);
+                            replicas, &plan.levels, choose_device(options, setup.cuda));
 }
 
 // The finish the setup asks for (finish_design).
@@ -297,6 +323,7 @@ inline CompletedDesign finish(const PlannedDesign& plan, DesignResult result, co
 // plan's (setup.initial is not read). The start, the annealing unless setup.start_only,
 // the finish.
 inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const DesignSetup& setup = {}) {
+    if (!setup.start_only) choose_device(plan.options, setup.cuda);  // a refused device: before any work
     if (setup.callbacks.phase) setup.callbacks.phase(finding_the_start(plan.scene));
     DesignResult result;
     if (setup.start_only) {

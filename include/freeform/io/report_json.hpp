@@ -226,6 +226,7 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
     m["iterations_per_second"] = r.seconds > 0 ? double(r.iterations) / r.seconds : 0.0;
     m["seed"] = options.seed;
     m["tracer"] = "heightfield";
+    m["device"] = r.device;  // where the windows were judged: "cpu" or "cuda (<name>)"
     m["interrupted"] = r.stopped_early;
     m["rays"] = d.fitted.rays.size();
     m["mesh"] = nlohmann::json::array({r.surface.nx(), r.surface.ny()});
