@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -595,9 +596,15 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
 
 // A device's backend stood in for by the host's kernel forms, counting what the design
 // asked of it (a device is not needed to test what the designer does with one).
+// With `fail_at` > 0, the fail_at-th window (counted over every backend of the design)
+// throws, as a device that fails mid-design would; with `fail_commit`, its first commit
+// after that many windows does.
 class CountingWindowBackend final : public WindowBackend {
 public:
-    explicit CountingWindowBackend(std::int64_t& windows) : windows_(windows) {}
+    // `failed_at`, when given, gets the window count when the commit threw.
+    explicit CountingWindowBackend(std::int64_t& windows, std::int64_t fail_at = 0, bool fail_commit = false,
+                                   std::int64_t* failed_at = nullptr)
+        : windows_(windows), fail_at_(fail_at), fail_commit_(fail_commit), failed_at_(failed_at) {}
     void upload_state(const IncrementalTrace& trace, const SlottedRayCellIndex& index,
                       std::span<const RayRecord> records) override {
         inner_.upload_state(trace, index, records);
@@ -607,17 +614,25 @@ public:
                   std::span<const WindowPatch> patches, std::span<const std::int32_t> slot_proposal,
                   float pad) override {
         ++windows_;
+        if (fail_at_ > 0 && !fail_commit_ && windows_ == fail_at_) throw std::runtime_error("device lost");
         inner_.evaluate(trace, moves, patches, slot_proposal, pad);
     }
     const WindowChange& change(std::size_t p) const override { return inner_.change(p); }
     bool commit(std::span<const std::int32_t> rays, std::span<const RayRecord> records,
                 std::span<const std::int32_t> begin, std::span<const CellCrossing> crossings) override {
+        if (fail_commit_ && windows_ >= fail_at_) {
+            if (failed_at_ && *failed_at_ < 0) *failed_at_ = windows_;  // the first failure
+            throw std::runtime_error("out of device memory");
+        }
         return inner_.commit(rays, records, begin, crossings);
     }
 
 private:
     HostKernelWindowBackend<exec::seq_t> inner_{exec::seq_t{}};
     std::int64_t& windows_;
+    std::int64_t fail_at_;
+    bool fail_commit_;
+    std::int64_t* failed_at_;
 };
 
 // optimise.device "cuda" through DesignSetup::cuda: the designer hands every stage's
@@ -685,6 +700,38 @@ TEST_CASE("a design whose windows run on an offered device is the CPU design bit
         CHECK(d.result.device == "cpu");
         CHECK(backends == 0);
         check_identical(cpu.result, d.result);
+    }
+
+    SUBCASE("a device that fails mid-design (a window, a commit, its backend) leaves the design to the CPU, the same") {
+        DesignOptions o = c.options;
+        o.device = Device::cuda;
+        struct Failure {
+            const char* name;
+            std::int64_t fail_at;
+            bool fail_commit, fail_make;
+            const char* message;
+        };
+        for (const Failure& f : {Failure{"a window throws", 40, false, false, "device lost"},
+                                 Failure{"a commit throws", 40, true, false, "out of device memory"},
+                                 Failure{"the second stage's backend cannot be made", 0, false, true, "no memory"}}) {
+            CAPTURE(std::string(f.name));
+            DeviceOffer failing = offer;
+            std::int64_t failed_at = -1;
+            failing.make = [&](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
+                if (f.fail_make && ++backends == 2) throw std::runtime_error(f.message);
+                return std::make_unique<CountingWindowBackend>(windows, f.fail_at, f.fail_commit, &failed_at);
+            };
+            DesignSetup setup = quick;
+            setup.cuda = failing;
+            backends = windows = 0;
+            const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
+            check_identical(cpu.result, d.result);
+            CHECK(d.result.device == "cuda (host kernels)");
+            CHECK(d.result.device_failure.find(f.message) != std::string::npos);
+            CHECK(d.result.device_failure.starts_with(f.fail_make ? "level 2 stage 1: " : "level "));
+            // No window after the failure (a commit fails at the first accepted move after fail_at).
+            if (!f.fail_make) CHECK(windows == (f.fail_commit ? failed_at : f.fail_at));
+        }
     }
 }
 

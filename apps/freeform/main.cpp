@@ -442,6 +442,9 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 result.seconds,
                 budget > 0 ? (" (time budget " + fixed(budget, 1) + " s, the start included)").c_str() : "",
                 d.finish_seconds, writing_seconds);
+    if (!result.device_failure.empty())
+        std::printf("  device: %s failed at %s; the CPU went on with the same design\n", result.device.c_str(),
+                    result.device_failure.c_str());
     // A level the budget could not afford (design/designer.hpp, trace_affordable): say so.
     if (!result.start.left_out.empty()) std::printf("  time budget: %s\n", result.start.left_out.c_str());
     print_forms(d, m);

@@ -14,12 +14,15 @@ floor of 32 per mesh cell) for each receiver size R, at one time budget, and rec
 Usage (from the repository root, after a release build):
 
   /usr/bin/python3 benchmarks/scale/scale.py --bin build/release/bin/freeform \\
-      [--sizes 200,400,512,1024] [--budget 60] [--threads 2] [--out benchmarks/results/scale]
+      [--sizes 200,400,512,1024] [--budget 60] [--threads 2] [--device cpu|cuda] [--append] \\
+      [--out benchmarks/results/scale]
 
-It writes scale.csv, scale.json and scale.png (the four figures against R) into --out,
-and keeps each design's metrics.json and comparison.png under --out/runs/R/. A device
-column is for a GPU design path (`--device cuda`, not built yet): the chart shows the CPU
-alone until one exists. Timing needs an idle machine.
+It writes scale.csv, scale.json and scale.png (the four figures against R, one line per
+device) into --out, and keeps each design's metrics.json and comparison.png under
+--out/runs/R/ (runs/R-cuda/ for the GPU). `--device cuda` designs with the GPU
+(`freeform design --device cuda`: a build with CUDA on a machine with a device,
+docs/cuda.md); `--append` keeps scale.json's other rows, so that the GPU's are added to
+the CPU's. Timing needs an idle machine.
 """
 import argparse
 import csv
@@ -58,14 +61,14 @@ def scene_for(size: int, target: Path, budget: float) -> dict:
     }
 
 
-def run_one(binary: str, size: int, budget: float, threads: int, out: Path) -> dict:
-    run_dir = out / "runs" / str(size)
+def run_one(binary: str, size: int, budget: float, threads: int, device: str, out: Path) -> dict:
+    run_dir = out / "runs" / (str(size) if device == "cpu" else f"{size}-{device}")
     run_dir.mkdir(parents=True, exist_ok=True)
     scene = run_dir / "scene.json"
     scene.write_text(json.dumps(scene_for(size, target_png(size, run_dir), budget), indent=1))
     design = run_dir / "design"
     cmd = ["/usr/bin/time", "-v", binary, "design", str(scene), "--out", str(design), "--threads", str(threads),
-           "--quiet"]
+           "--device", device, "--quiet"]
     p = subprocess.run(cmd, capture_output=True, text=True)
     (run_dir / "log.txt").write_text(p.stdout + p.stderr)
     if p.returncode != 0:
@@ -98,34 +101,53 @@ def run_one(binary: str, size: int, budget: float, threads: int, out: Path) -> d
         "peak_memory_gib": rss_kb / 2 ** 20,
         "error_physical": m.get("error_physical"),
         "error": m["error"],
-        "device": "cpu",
+        "device": m.get("device", "cpu"),
         "threads": threads,
         "budget": budget,
     }
+
+
+def series(rows: list) -> dict:
+    """The rows of each device, in receiver order: {label: rows}, the CPU first."""
+    out = {}
+    for row in sorted(rows, key=lambda row: (row.get("device", "cpu") != "cpu", row["receiver"])):
+        device = row.get("device", "cpu")
+        label = f"CPU, {row['threads']} threads" if device == "cpu" else f"GPU, {device[len('cuda ('):-1]}" \
+            if device.startswith("cuda (") else device
+        out.setdefault(label, []).append(row)
+    return out
 
 
 def chart(rows: list, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    r = [row["receiver"] for row in rows]
+    by_device = series(rows)
+    rows = [row for group in by_device.values() for row in group]  # the bars' order: each device's sizes
+    r = sorted({row["receiver"] for row in rows})
     fig, ax = plt.subplots(2, 2, figsize=(10, 7.5))
-    annealed = [row for row in rows if row["moves_per_second_final_level"] > 0]
-    ax[0][0].plot([row["receiver"] for row in annealed], [row["moves_per_second_final_level"] for row in annealed],
-                  "o-", label="CPU, 2 cores")
+    for label, group in by_device.items():
+        style = "o-" if label.startswith("CPU") else "s--"
+        annealed = [row for row in group if row["moves_per_second_final_level"] > 0]
+        ax[0][0].plot([row["receiver"] for row in annealed], [row["moves_per_second_final_level"] for row in annealed],
+                      style, label=label)
+        ax[1][0].plot([row["receiver"] for row in group], [row["peak_memory_gib"] for row in group], style,
+                      label=label)
+        ax[1][1].plot([row["receiver"] for row in group], [row["error_physical"] for row in group], style,
+                      label=label)
     for row in rows:
         if row["moves_per_second_final_level"] <= 0:
             # The budget could not afford the level's trace: the design is its start.
             ax[0][0].annotate("not annealed:\nthe start only", (row["receiver"], 0), xycoords=("data", "axes fraction"),
                               xytext=(0, 12), textcoords="offset points", ha="center", fontsize=8)
     ax[0][0].set_ylabel("moves / s (final level)")
-    if annealed:
+    if any(row["moves_per_second_final_level"] > 0 for row in rows):
         ax[0][0].set_yscale("log")
     # One bar per design: the start, each annealed level (finest last), the finish (the
     # final traces, the export and its cell means) and the rest of the wall time (writing
     # the files, the process itself).
-    x = list(range(len(r)))
-    bottom = [0.0] * len(r)
+    x = list(range(len(rows)))
+    bottom = [0.0] * len(rows)
 
     def stack(values, label, colour=None):
         ax[0][1].bar(x, values, bottom=bottom, label=label, color=colour)
@@ -145,27 +167,27 @@ def chart(rows: list, out: Path) -> None:
     stack([row["finish_seconds"] for row in rows], "finish (traces, export, cell means)", "tab:green")
     stack([max(0.0, row["wall_seconds"] - row["design_seconds"] - row["finish_seconds"]) for row in rows],
           "writing files, process", "tab:grey")
-    ax[0][1].set_xticks(list(x), [str(v) for v in r])
+    ax[0][1].set_xticks(list(x), [str(row["receiver"]) + ("" if row.get("device", "cpu") == "cpu" else "\nGPU")
+                                  for row in rows])
     ax[0][1].set_ylabel("seconds")
     ax[0][1].legend(fontsize=8)
-    ax[1][0].plot(r, [row["peak_memory_gib"] for row in rows], "o-")
-    ax[1][0].set_ylabel("peak memory (GiB)")
-    ax[1][1].plot(r, [row["error_physical"] for row in rows], "o-", label="CPU, 2 cores")
+    ax[1][0].set_ylabel("peak memory (GiB, host)")
     before = [row for row in rows if "error_physical_before" in row]
     if before:
         # An earlier run of the same sizes, kept in scale.json for comparison (its label says which).
         ax[1][1].plot([row["receiver"] for row in before], [row["error_physical_before"] for row in before], "s--",
                       color="grey", label=before[0].get("before", "before"))
-        ax[1][1].legend(fontsize=8)
     ax[1][1].set_ylabel("error_physical at equal time")
     for a in (ax[0][0], ax[1][0], ax[1][1]):
         a.set_xlabel("receiver (pixels per side)")
         a.set_xticks(r)
         a.grid(alpha=0.3)
+        a.legend(fontsize=8)
     ax[0][1].set_xlabel("receiver (pixels per side)")
     budget = rows[0]["budget"]
-    fig.suptitle(f"Cost against resolution: Grace Hopper as a mirror, {budget:g} s budget, CPU "
-                 f"({rows[0]['threads']} threads); no GPU design path yet")
+    devices = " and ".join(by_device)
+    gpu = "" if len(by_device) > 1 else "; no GPU row measured yet"
+    fig.suptitle(f"Cost against resolution: Grace Hopper as a mirror, {budget:g} s budget, {devices}{gpu}")
     fig.tight_layout()
     fig.savefig(out / "scale.png", dpi=110)
 
@@ -176,6 +198,8 @@ def main() -> None:
     ap.add_argument("--sizes", default="200,400,512,1024")
     ap.add_argument("--budget", type=float, default=60)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="freeform design --device")
+    ap.add_argument("--append", action="store_true", help="keep --out's scale.json rows of other sizes or devices")
     ap.add_argument("--out", default="benchmarks/results/scale")
     ap.add_argument("--chart-only", action="store_true", help="redraw scale.png from --out's scale.json")
     a = ap.parse_args()
@@ -188,17 +212,22 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for size in [int(s) for s in a.sizes.split(",")]:
-        print(f"scale: {size} x {size} ...", flush=True)
-        rows.append(run_one(a.bin, size, a.budget, a.threads, out))
+        print(f"scale: {size} x {size} on the {a.device} ...", flush=True)
+        rows.append(run_one(a.bin, size, a.budget, a.threads, a.device, out))
         print(f"  mesh {rows[-1]['mesh']}, {rows[-1]['moves_per_second_final_level']:.0f} moves/s, "
               f"{rows[-1]['peak_memory_gib']:.2f} GiB, error_physical {rows[-1]['error_physical']}", flush=True)
+    if a.append and (out / "scale.json").exists():
+        new = {(row["receiver"], row["device"].split(" ")[0]) for row in rows}
+        kept = [row for row in json.loads((out / "scale.json").read_text())
+                if (row["receiver"], row.get("device", "cpu").split(" ")[0]) not in new]
+        rows = kept + rows
     (out / "scale.json").write_text(json.dumps(rows, indent=1))
     with open(out / "scale.csv", "w", newline="") as f:
         keys = [k for k in rows[0] if k != "level_seconds"]
         w = csv.DictWriter(f, fieldnames=keys + ["level_seconds"])
         w.writeheader()
         for row in rows:
-            w.writerow({**{k: row[k] for k in keys}, "level_seconds": json.dumps(row["level_seconds"])})
+            w.writerow({**{k: row.get(k) for k in keys}, "level_seconds": json.dumps(row["level_seconds"])})
     chart(rows, out)
     print(f"scale: {out / 'scale.csv'}, {out / 'scale.png'}")
 

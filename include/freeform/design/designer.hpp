@@ -100,6 +100,9 @@ struct DesignResult {
     // Where the annealing's windows were judged: "cpu", or "cuda (<device name>)"
     // (optimise.device; design/device.hpp).
     std::string device = "cpu";
+    // Where and why the device failed, when it did ("level 2 stage 1: <error>"); the
+    // design then went on on the CPU, the same bit for bit. Empty: it did not.
+    std::string device_failure;
 };
 
 // Kernel supports of level k (reference §4.4, multi-level Gaussian kernels). The first
@@ -751,16 +754,29 @@ int stage_window(const State& d) {
     return d.device->window > 0 ? d.device->window : default_device_window;
 }
 
+// The device failed (its backend could not be made, or a window or commit threw,
+// BasicSurfaceProblem::window_failure): the design goes on on the CPU, said in the result.
+template <class State>
+void device_failed(State& d, const LevelSetup& L, std::size_t si, const std::string& why) {
+    d.result.device_failure =
+        "level " + std::to_string(L.index + 1) + " stage " + std::to_string(si + 1) + ": " + why;
+    d.device = nullptr;
+}
+
 // The stage's windows on the design's device, if it has one: the device's backend over
 // the stage's surface and rays, kept current by CopiedStateWindowEvaluator
 // (trace/window.hpp). Only the height-field backend judges windows.
 template <class Backend, class State>
-void use_device(const State& d, const LevelSetup& L, BasicSurfaceProblem<Backend>& problem) {
+void use_device(State& d, const LevelSetup& L, std::size_t si, BasicSurfaceProblem<Backend>& problem) {
     if constexpr (std::is_same_v<Backend, HeightfieldBackend>) {
         if (!d.device) return;
         const TraceSetup& t = L.trace_setup;
-        problem.set_window_evaluator(
-            std::make_unique<CopiedStateWindowEvaluator>(d.device->make(d.surface, t.rays, t.params)));
+        try {
+            problem.set_window_evaluator(
+                std::make_unique<CopiedStateWindowEvaluator>(d.device->make(d.surface, t.rays, t.params)));
+        } catch (const std::exception& e) {
+            device_failed(d, L, si, e.what());
+        }
     }
 }
 
@@ -916,7 +932,7 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     const int arms = std::max<int>(1, int(ps.bank.size()));
     const ProposalOptions& prop = d.options.proposals;
     auto problem = make_problem<Backend>(d, L, ps, make_bandit(prop.bandit, arms, prop.bandit_sync));
-    use_device(d, L, problem);
+    use_device(d, L, si, problem);
     const Calibration cal = calibrate(problem, stage_seed, d.moves.schedule.initial_acceptance, d.timed);
     // Identity for one replica.
     const double t0 = d.replicas.common_temperature(cal.temperature * d.options.schedule.initial_temperature_scale);
@@ -946,6 +962,8 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     const auto stage_start = d.clock();
     auto hooks = stage_hooks(d, problem, L, si, report, held_out, held_best, support, stage_time);
     const AnnealResult ar = anneal(problem, ao, hooks);
+    if constexpr (std::is_same_v<Backend, HeightfieldBackend>)
+        if (!problem.window_failure().empty()) device_failed(d, L, si, problem.window_failure());
     // Sharing replicas end the stage on one surface: each holds its best since the last
     // merge, and these are merged (unless nothing ran since; every replica ran the same
     // iterations, so all decide alike).

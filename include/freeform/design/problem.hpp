@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <span>
 #include <string>
@@ -205,6 +206,11 @@ public:
     }
     bool window_evaluation() const { return evaluator_ != nullptr; }
     WindowEvaluator* window_evaluator() const { return evaluator_.get(); }
+    // What ended window evaluation during the run: the evaluator's exception (a device
+    // that failed, ran out of memory, was reset); empty when nothing did. From then on the
+    // moves are judged one by one on the host, which gives the same deltas: the design
+    // goes on, the same bit for bit, only slower.
+    const std::string& window_failure() const { return window_failure_; }
 
     // The deltas of a window's moves, evaluated together: out[k] = delta(moves[k]).
     void delta_window(std::span<Move> moves, std::span<double> out) const
@@ -218,7 +224,13 @@ public:
             window_moves_[n++] = m.overlay;
         }
         const std::span<const HeightOverlay> changing(window_moves_.data(), n);
-        evaluator_->evaluate(trace_, changing);
+        try {
+            evaluator_->evaluate(trace_, changing);
+        } catch (const std::exception& e) {
+            drop_evaluator(e);
+            for (std::size_t k = 0; k < moves.size(); ++k) out[k] = delta(moves[k]);
+            return;
+        }
         const std::int64_t cells = std::int64_t(image_.width()) * image_.height();
         std::size_t p = 0;
         for (std::size_t k = 0; k < moves.size(); ++k) {
@@ -258,7 +270,7 @@ public:
         m.overlay.commit(*surface_);
         backend_.committed(m.overlay.patch);
         trace_.commit(m.change, pool);
-        if (evaluator_) evaluator_->committed(trace_, m.change, m.overlay.patch);
+        pass_commit(m);
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
         value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
@@ -307,6 +319,22 @@ public:
     }
 
 private:
+    // The window evaluator's side of a commit (it keeps its copy of the state current).
+    void pass_commit(const Move& m) {
+        if (!evaluator_) return;
+        try {
+            evaluator_->committed(trace_, m.change, m.overlay.patch);
+        } catch (const std::exception& e) {
+            drop_evaluator(e);
+        }
+    }
+    // Window evaluation off for the rest of the run (window_failure()); const because
+    // delta_window is (the evaluator is state of the evaluation, not of the design).
+    void drop_evaluator(const std::exception& e) const {
+        window_failure_ = e.what();
+        evaluator_.reset();
+    }
+
     // replace_heights when the heights change inside a box of at most a quarter of the
     // vertices; false (nothing done) otherwise.
     bool replace_inside_box(const std::vector<float>& heights) {
@@ -320,7 +348,7 @@ private:
             m.overlay.commit(*surface_);
             backend_.committed(m.overlay.patch);
             trace_.commit(m.change);
-            if (evaluator_) evaluator_->committed(trace_, m.change, m.overlay.patch);
+            pass_commit(m);
             image_.apply(m.change.histogram, m.sums);
         }
         penalty_sum_ = penalties_->full(*surface_);
@@ -406,7 +434,8 @@ private:
     std::vector<float> best_heights_;
     double max_error_ = 0;
     int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
-    std::unique_ptr<WindowEvaluator> evaluator_;       // delta_window's, null: windows off
+    mutable std::unique_ptr<WindowEvaluator> evaluator_;  // delta_window's, null: windows off
+    mutable std::string window_failure_;                  // why it was dropped (drop_evaluator)
     mutable std::vector<HeightOverlay> window_moves_;  // its moves that change something
 };
 

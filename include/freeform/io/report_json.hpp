@@ -227,6 +227,7 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
     m["seed"] = options.seed;
     m["tracer"] = "heightfield";
     m["device"] = r.device;  // where the windows were judged: "cpu" or "cuda (<name>)"
+    if (!r.device_failure.empty()) m["device_failure"] = r.device_failure;  // then the CPU took over
     m["interrupted"] = r.stopped_early;
     m["rays"] = d.fitted.rays.size();
     m["mesh"] = nlohmann::json::array({r.surface.nx(), r.surface.ny()});
