@@ -87,7 +87,7 @@ int main(int argc, char** argv) try {
     }
     const std::string out_path = argv[1], scene = argv[2];
     double iterations = 20000, threads = 2, gpu_seconds = 0, cpu_seconds = 0;
-    for (int a = 3; a < argc; ++a) {
+    for (int a = 3; a < argc; a += 2) {  // NAME VALUE pairs
         const std::string name = argv[a];
         double* target = name == "--iterations"    ? &iterations
                          : name == "--threads"     ? &threads
@@ -100,7 +100,6 @@ int main(int argc, char** argv) try {
             return 2;
         }
         *target = *v;
-        ++a;
     }
     const DesignJob job = io::load_job(scene);
     const ImageD target = io::load_target_image(job.scene);

@@ -77,6 +77,14 @@ CASES = [
     ("missing font", lambda ff, s, n: ff.design(ff.Scene.from_json(
         {"light": {"type": "collimated"}, "surface": {"mesh": [9, 9]}, "receiver": {"resolution": [8, 8]},
          "target": {"text": "E", "font": "NoSuchFontAnywhere"}})), FileNotFoundError, r"NoSuchFontAnywhere"),
+    # optimise.device: this module offers no device (only a program built with nvcc can, docs/cuda.md)
+    ("device cuda", lambda ff, s, n: ff.design(ff.Scene.from_json(
+        {"light": {"type": "collimated"}, "surface": {"mesh": [9, 9]}, "receiver": {"resolution": [8, 8]},
+         "target": {"text": "E"}, "optimise": {"device": "cuda"}})), ValueError,
+     r'^optimise\.device: "cuda" asked for, but the program running this design offers no CUDA device'),
+    ("device unknown", lambda ff, s, n: ff.Scene.from_json(
+        {"light": {"type": "collimated"}, "surface": {}, "receiver": {}, "optimise": {"device": "gpu"}}),
+     ValueError, r"optimise\.device"),
     # render inputs
     ("heightmap NaN", lambda ff, s, n: ff.render(s, np.full((17, 17), np.nan)), ValueError,
      r"^heightmap: the array has a non-finite value at row 0, column 0$"),
