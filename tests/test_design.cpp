@@ -702,6 +702,20 @@ TEST_CASE("a design whose windows run on an offered device is the CPU design bit
         check_identical(cpu.result, d.result);
     }
 
+    SUBCASE("a timed design on a device keeps its budget (stage budgets fitted to the device's measured speed)") {
+        DesignOptions o = c.options;
+        o.device = Device::cuda;
+        o.time_budget = 2;
+        o.levels.clear();  // planned for the time, as a user's design is
+        DesignSetup setup = quick;
+        setup.cuda = offer;
+        backends = windows = 0;
+        const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
+        CHECK(d.result.iterations > 0);
+        CHECK(windows > 0);
+        CHECK(d.result.seconds < 1.5 * o.time_budget);
+        CHECK(d.result.device_failure.empty());
+    }
     SUBCASE("a device that fails mid-design (a window, a commit, its backend) leaves the design to the CPU, the same") {
         DesignOptions o = c.options;
         o.device = Device::cuda;

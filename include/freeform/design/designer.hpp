@@ -552,6 +552,10 @@ struct DesignState {
     Replicas& replicas;
     // The device the stages' windows run on (design/device.hpp); null: the CPU.
     const DeviceOffer* device;
+    // How much faster than expected_speed's CPU estimate the device's stages ran, as the
+    // last timed stage on it measured (1 until one has): a timed stage's iteration budget
+    // is then fitted to the device's speed, not the host calibration's.
+    double device_speedup = 1;
     // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
     // may then depend on measured time (see calibrate()). Otherwise the run is timed: its
     // calibrations are cut short by slow moves and its stages' budgets fit the speed.
@@ -721,6 +725,16 @@ void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) 
     keep_trace(L, pre);
 }
 
+// Iterations per second a stage is expected to make, from the calibration's speed (moves
+// judged one by one on the host): speculative windows on the CPU's threads gain about 60 %
+// per extra thread, and a device what its earlier stages of this design measured
+// (device_speedup).
+template <class State>
+double expected_speed(const State& d, double moves_per_second, int speculative) {
+    const double parallel = 1.0 + 0.6 * (std::min(speculative, d.threads) - 1);
+    return moves_per_second * parallel * (d.device ? d.device_speedup : 1.0);
+}
+
 // The stage's iteration budget: with a time budget and no iteration cap, as many
 // iterations as the measured speed fits in the stage's time (so that the temperature
 // schedule completes); otherwise the plan's, which makes the run reproducible.
@@ -729,10 +743,9 @@ std::int64_t stage_budget(const State& d, const LevelSetup& L, std::size_t si, d
                           double stage_time, int speculative) {
     const double level_share = L.plan->time_share;
     std::int64_t budget = std::max<std::int64_t>(1, L.plan->iterations / std::int64_t(L.stages));
-    if (d.timed) {
-        const double parallel = 1.0 + 0.6 * (std::min(speculative, d.threads) - 1);
-        budget = std::max<std::int64_t>(500, std::int64_t(0.9 * moves_per_second * parallel * stage_time));
-    }
+    if (d.timed)
+        budget = std::max<std::int64_t>(
+            500, std::int64_t(0.9 * expected_speed(d, moves_per_second, speculative) * stage_time));
     if (d.options.max_iterations > 0) {
         // The cap is shared by every stage still to run, in proportion to the levels'
         // time shares, so that no level is starved by an earlier one.
@@ -986,6 +999,9 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     }
     report.stop_reason = hooks.gain.gave_up && !hooks.stopped ? StopReason::no_gain : ar.reason;
     end_stage(d, problem, ar, report, stage_start, hooks.stopped);
+    if (d.device && d.timed && ar.iterations > 0 && report.seconds > 0)
+        d.device_speedup *= std::max(0.1, double(ar.iterations) / report.seconds /
+                                              expected_speed(d, cal.moves_per_second, ao.speculative));
     if (d.design_last(L, si) || d.stop)
         keep_result(d, problem, ps, report, L, held_out, held_best);
     else
