@@ -531,7 +531,9 @@ public:
     // `plan`: read here (its line is made now; the plan itself goes on to the design).
     // `device`: where the windows run, when not on the CPU (its name).
     DesignMonitor(const DesignArgs& a, const PlannedDesign& plan, const DeviceOffer* device)
-        : header_line_(header_line(a, plan) + (device ? ", on " + device->name : std::string())), quiet_(a.quiet || world_rank != 0), status_(!quiet_) {}
+        : header_line_(header_line(a, plan) + (device ? ", on " + device->name : std::string())),
+          quiet_(a.quiet || world_rank != 0),
+          status_(!quiet_) {}
 
     bool quiet() const { return quiet_; }
     StatusLine& status() { return status_; }
