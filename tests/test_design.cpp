@@ -654,6 +654,16 @@ TEST_CASE("a design whose windows run on an offered device is the CPU design bit
         ++backends;
         return std::make_unique<CountingWindowBackend>(windows);
     };
+    // The design with `o` on the device `given` offers: the CPU's bit for bit, said to be on the device.
+    const auto on_device = [&](const DesignOptions& o, const DeviceOffer& given) {
+        DesignSetup setup = quick;
+        setup.cuda = given;
+        backends = windows = 0;
+        CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
+        check_identical(cpu.result, d.result);
+        CHECK(d.result.device == "cuda (host kernels)");
+        return d;
+    };
     for (const Device asked : {Device::cuda, Device::automatic})
         for (const int threads : {1, 2}) {
             CAPTURE(to_string(asked));
@@ -661,12 +671,7 @@ TEST_CASE("a design whose windows run on an offered device is the CPU design bit
             DesignOptions o = c.options;
             o.device = asked;
             o.threads = threads;
-            DesignSetup setup = quick;
-            setup.cuda = offer;
-            backends = windows = 0;
-            const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
-            check_identical(cpu.result, d.result);
-            CHECK(d.result.device == "cuda (host kernels)");
+            const CompletedDesign d = on_device(o, offer);
             CHECK(backends == std::int64_t(d.result.stages.size()));  // one per stage
             CHECK(windows > 0);
         }
@@ -735,12 +740,7 @@ TEST_CASE("a design whose windows run on an offered device is the CPU design bit
                 if (f.fail_make && ++backends == 2) throw std::runtime_error(f.message);
                 return std::make_unique<CountingWindowBackend>(windows, f.fail_at, f.fail_commit, &failed_at);
             };
-            DesignSetup setup = quick;
-            setup.cuda = failing;
-            backends = windows = 0;
-            const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
-            check_identical(cpu.result, d.result);
-            CHECK(d.result.device == "cuda (host kernels)");
+            const CompletedDesign d = on_device(o, failing);
             CHECK(d.result.device_failure.find(f.message) != std::string::npos);
             CHECK(d.result.device_failure.starts_with(f.fail_make ? "level 2 stage 1: " : "level "));
             // No window after the failure (a commit fails at the first accepted move after fail_at).
