@@ -529,9 +529,9 @@ DesignJob design_job(const DesignArgs& a, const Limits& limits) {
 class DesignMonitor {
 public:
     // `plan`: read here (its line is made now; the plan itself goes on to the design).
-    // `device`: where the windows run, when not on the CPU (its name).
-    DesignMonitor(const DesignArgs& a, const PlannedDesign& plan, const DeviceOffer* device)
-        : header_line_(header_line(a, plan) + (device ? ", on " + device->name : std::string())),
+    // `device`: the name of the device the windows run on; empty: the CPU.
+    DesignMonitor(const DesignArgs& a, const PlannedDesign& plan, const std::string& device)
+        : header_line_(header_line(a, plan) + (device.empty() ? std::string() : ", on " + device)),
           quiet_(a.quiet || world_rank != 0),
           status_(!quiet_) {}
 
@@ -642,9 +642,11 @@ int run_design(const DesignArgs& a) {
     const Scene& scene = job.scene;
     // The device: one asked for but not there is an input error (exit 2), before any work.
     DesignSetup setup;
+    std::string device;  // its name for the first line; empty: the CPU
     if (job.options.device != Device::cpu && !a.start_only) {
         setup.cuda = cli::cuda_offer();
-        choose_device(job.options, setup.cuda, a.device ? "--device" : "optimise.device");
+        const std::string key = a.device ? "--device" : "optimise.device";
+        if (const DeviceOffer* chosen = choose_device(job.options, setup.cuda, key)) device = chosen->name;
     }
     check_output_dir(a.out, design_outputs);
     // Planned once: the memory check (before any surface is made), the header line, the
@@ -659,7 +661,7 @@ int run_design(const DesignArgs& a) {
     setup.start_only = a.start_only;
 
     std::signal(SIGINT, on_sigint);
-    DesignMonitor monitor(a, plan, a.start_only ? nullptr : choose_device(plan.options, setup.cuda));
+    DesignMonitor monitor(a, plan, device);
     setup.callbacks = monitor.callbacks();
     DesignRun run = design_run(a, std::move(plan), target, std::move(setup), monitor);
     // Another MPI rank: rank 0 writes the winner's design.

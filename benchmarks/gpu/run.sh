@@ -16,7 +16,7 @@
 # 3. design_bench (benchmarks/gpu/design_bench.cpp with the command line's device,
 #    apps/freeform/device/cuda.cu): the letter E designed for a fixed 20,000 iterations
 #    on 2 CPU threads and with its windows on the GPU (speeds; heights bit for bit), then
-#    for 40 s on the CPU and 10 s on the GPU (fitted errors). DESIGN_BENCH=0 skips it.
+#    for 40 s on the CPU and 10 s on the GPU (cell-mean errors of the designed surfaces). DESIGN_BENCH=0 skips it.
 # Writes OUT_DIR/gpu_vs_cpu.log, OUT_DIR/trace_bench.json, OUT_DIR/trace_bench.log,
 # OUT_DIR/design_bench.json and OUT_DIR/design_bench.log.
 # About 3 minutes on an H200 machine (16 cores) for steps 1 and 2, most of it compiling;

@@ -552,8 +552,8 @@ struct DesignState {
     Replicas& replicas;
     // The device the stages' windows run on (design/device.hpp); null: the CPU.
     const DeviceOffer* device;
-    // How much faster than expected_speed's CPU estimate the device's stages ran, as the
-    // last timed stage on it measured (1 until one has): a timed stage's iteration budget
+    // How much faster than cpu_speed's estimate the device's stages ran, as the last
+    // timed stage on it measured (1 until one has): a timed stage's iteration budget
     // is then fitted to the device's speed, not the host calibration's.
     double device_speedup = 1;
     // An iteration cap, or no time budget, makes a run reproducible bit for bit: nothing
@@ -725,14 +725,19 @@ void preprocess(State& d, LevelSetup& L, int support, std::uint64_t stage_seed) 
     keep_trace(L, pre);
 }
 
-// Iterations per second a stage is expected to make, from the calibration's speed (moves
-// judged one by one on the host): speculative windows on the CPU's threads gain about 60 %
-// per extra thread, and a device what its earlier stages of this design measured
-// (device_speedup).
+// Iterations per second a stage would make on the CPU, from the calibration's speed
+// (moves judged one by one on the host): speculative windows on the CPU's threads gain
+// about 60 % per extra thread.
+template <class State>
+double cpu_speed(const State& d, double moves_per_second, int speculative) {
+    return moves_per_second * (1.0 + 0.6 * (std::min(speculative, d.threads) - 1));
+}
+
+// ... and what it is expected to make: on a device, that times what the design's earlier
+// stages on it measured (device_speedup).
 template <class State>
 double expected_speed(const State& d, double moves_per_second, int speculative) {
-    const double parallel = 1.0 + 0.6 * (std::min(speculative, d.threads) - 1);
-    return moves_per_second * parallel * (d.device ? d.device_speedup : 1.0);
+    return cpu_speed(d, moves_per_second, speculative) * (d.device ? d.device_speedup : 1.0);
 }
 
 // The stage's iteration budget: with a time budget and no iteration cap, as many
@@ -1000,8 +1005,8 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     report.stop_reason = hooks.gain.gave_up && !hooks.stopped ? StopReason::no_gain : ar.reason;
     end_stage(d, problem, ar, report, stage_start, hooks.stopped);
     if (d.device && d.timed && ar.iterations > 0 && report.seconds > 0)
-        d.device_speedup *= std::max(0.1, double(ar.iterations) / report.seconds /
-                                              expected_speed(d, cal.moves_per_second, ao.speculative));
+        d.device_speedup = std::max(0.1, double(ar.iterations) / report.seconds /
+                                             cpu_speed(d, cal.moves_per_second, ao.speculative));
     if (d.design_last(L, si) || d.stop)
         keep_result(d, problem, ps, report, L, held_out, held_best);
     else
