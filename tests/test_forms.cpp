@@ -126,6 +126,20 @@ TEST_CASE("export formats: auto is STEP and the mesh where STEP is built, else t
     if (!io::format_available(ExportFormat::step)) CHECK_THROWS_AS(io::export_formats(s), InputError);
 }
 
+TEST_CASE("the STEP part's spline: Hermite while it fits about 50 MB, else least squares; the key overrides") {
+    const Heightmap small(201, 201, {0.1, 0.1}, -0.01, 0.01), big(400, 400, {0.1, 0.1}, -0.01, 0.01);
+    REQUIRE(4LL * 201 * 201 <= hermite_max_poles);
+    REQUIRE(4LL * 400 * 400 > hermite_max_poles);
+    const BSplineSurface a = step_spline(small, 1.0, SplineForm::automatic);
+    CHECK(a.hermite);
+    CHECK(a.nu == 402);
+    const BSplineSurface b = step_spline(big, 1.0, SplineForm::automatic);
+    CHECK_FALSE(b.hermite);
+    CHECK(b.nu == 402);  // one knot per grid line: 400 + 2 poles
+    CHECK_FALSE(step_spline(small, 1.0, SplineForm::least_squares).hermite);
+    CHECK(step_spline(big, 1.0, SplineForm::hermite).hermite);
+}
+
 TEST_CASE("a grid sag written and read back is judged from the file") {
     Scene s = basic_scene(40);
     Heightmap hm = surface_for(s, 21);

@@ -291,6 +291,46 @@ TEST_CASE("between the vertices the grid sag's bicubic surface follows the desig
     CHECK((flat.max_dz > bound_dz || flat.max_slope > bound_slope));
 }
 
+TEST_CASE("the STEP part's Hermite spline is the grid sag table's surface") {
+    // A design-like height map: curved, twisted and rippled at the cell scale.
+    Heightmap hm(41, 31, {0.04, 0.03}, -0.01, 0.01);
+    testing::shape(hm, [](double u, double v) { return smooth_shape(u, v) + 3e-6 * std::sin(2500 * u + 1800 * v); });
+    const BSplineSurface s = hermite_bspline(hm);
+    CHECK(s.hermite);
+    CHECK(s.nu == 82);
+    CHECK(s.nv == 62);
+    // At the vertices: the height map's heights and vertex normals.
+    double vz = 0, vn = 0;
+    for (int j = 0; j < hm.ny(); ++j)
+        for (int i = 0; i < hm.nx(); ++i) {
+            const SplineSample q = s.eval(hm.u_of(i), hm.v_of(j));
+            vz = std::max(vz, std::abs(q.z - double(hm(i, j))));
+            const Vec3d n = normalize(Vec3d(hm.normals()[std::size_t(j) * std::size_t(hm.nx()) + std::size_t(i)]));
+            vn = std::max(vn, std::acos(std::min(1.0, dot(q.normal(), n))));
+        }
+    CHECK(vz < 1e-15);
+    CHECK(vn < 1e-6);  // the normals are floats
+    // Everywhere: the table's bicubic surface by this file's own evaluator (16 × 16 solve
+    // per cell), against the spline's Cox–de Boor evaluation.
+    const std::filesystem::path f = "sag_hermite.dat";
+    io::write_grid_sag(f, hm);
+    const RawSag raw = parse_raw(f);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> ux(-0.02, 0.02), vy(-0.015, 0.015);
+    double dz = 0, ds = 0;
+    for (int n = 0; n < 400; ++n) {
+        const double u = ux(rng), v = vy(rng);
+        const auto t = raw_eval(raw, u * 1e3, v * 1e3);
+        const SplineSample q = s.eval(u, v);
+        dz = std::max(dz, std::abs(t[0] * 1e-3 - q.z));
+        ds = std::max({ds, std::abs(t[1] - q.z_u), std::abs(t[2] - q.z_v)});
+    }
+    MESSAGE("Hermite spline against the sag table's bicubic surface: heights within " << dz << " m, slopes within "
+                                                                                     << ds);
+    CHECK(dz < 1e-12);  // the table's 13 digits
+    CHECK(ds < 1e-9);
+}
+
 TEST_CASE("grid sag reader: bad files are refused with the line") {
     const std::filesystem::path f = "bad.dat";
     const auto write = [&](const std::string& text) { std::ofstream(f) << text; };

@@ -592,7 +592,11 @@ TEST_CASE("optimise keys: each reaches its module's option field") {
     j["optimise"]["kernel_shapes"] = "isotropic";
     j["optimise"]["evaluation"] = "full";
     j["optimise"]["export_formats"] = json::array({"sag"});
+    j["optimise"]["export_spline"] = "least_squares";
     const DesignOptions o = job_from_json(j).options;
+    CHECK(o.exports.spline == SplineForm::least_squares);
+    CHECK(DesignOptions{}.exports.spline == SplineForm::automatic);
+    CHECK(job_to_json(job_from_json(j))["optimise"]["export_spline"] == "least_squares");
     CHECK(o.proposals.bandit == BanditKind::ucb1);
     CHECK(o.proposals.kernel_shapes == KernelShapes::isotropic);
     CHECK(o.evaluation == EvaluationMode::full);

@@ -38,10 +38,11 @@ double smooth_shape(double u, double v) {
     return 0.0004 + 0.05 * u - 0.02 * v + 2.0 * u * u + 1.2 * v * v + 0.0002 * std::sin(400 * u) * std::cos(300 * v);
 }
 
-BSplineSurface smooth_spline(int nx, int ny, Vec2d size) {
+// The least-squares spline (one knot per grid line) or the Hermite one (double knots).
+BSplineSurface smooth_spline(int nx, int ny, Vec2d size, bool hermite = false) {
     Heightmap hm(nx, ny, size, -0.01, 0.01);
     freeform::testing::shape(hm, smooth_shape);
-    return fit_bspline(hm, 1.0, 4);
+    return hermite ? hermite_bspline(hm) : fit_bspline(hm, 1.0, 4);
 }
 
 double lowest_pole(const BSplineSurface& s) { return *std::min_element(s.z.begin(), s.z.end()); }
@@ -79,9 +80,15 @@ double angle_between(Vec3d a, Vec3d b) { return std::atan2(length(cross(a, b)), 
 
 }  // namespace
 
-TEST_CASE("STEP part of a fitted spline: one valid closed solid, its volume, and OCCT's top face equals the spline") {
+TEST_CASE("STEP part of a spline: one valid closed solid, its volume, and OCCT's top face equals the spline") {
     const Vec2d size{0.020, 0.015};
-    const BSplineSurface s = smooth_spline(41, 33, size);
+    BSplineSurface s;
+    SUBCASE("the least-squares spline") { s = smooth_spline(41, 33, size); }
+    SUBCASE("the Hermite spline: double knots, four times the poles") {
+        s = smooth_spline(41, 33, size, true);
+        CHECK(s.nu == 82);
+        CHECK(s.nv == 66);
+    }
     TempDir dir;
     const auto file = dir.path / "part.step";
     io::StepSolid solid;

@@ -756,7 +756,7 @@ int run_export(const ExportArgs& a) {
         const Heightmap top = export_blank(scene, hm);  // a lens's rim too
         const bool step = kind == ExportFile::step;
         // The sag table carries the height map's vertices; only STEP needs the spline.
-        const BSplineSurface spline = step ? fit_bspline(top, alpha, spline_samples_per_cell) : BSplineSurface{};
+        const BSplineSurface spline = step ? step_spline(top, alpha, job.options.exports.spline) : BSplineSurface{};
         const io::FormCheck fc = io::write_and_check_form(step ? ExportFormat::step : ExportFormat::sag, a.out, scene,
                                                           hm, spline, target ? &*target : nullptr,
                                                           job.options.seed, a.threads);
@@ -764,9 +764,10 @@ int run_export(const ExportArgs& a) {
                     fc.write_seconds, fc.valid.c_str());
         if (step) {
             const SplineFitReport fit = check_spline_fit(spline, top, alpha, spline_samples_per_cell);
-            std::printf("a bicubic B-spline of %d x %d poles within %.2g um (max) of the designed surface, normals "
-                        "within %.3f mrad (90th percentile), %.2f mrad (max)\n",
-                        spline.nu, spline.nv, fit.max_height_error * 1e6, fit.p90_normal_error * 1e3,
+            std::printf("a bicubic B-spline of %d x %d poles (%s) within %.2g um (max) of the designed surface, "
+                        "normals within %.3f mrad (90th percentile), %.2f mrad (max)\n",
+                        spline.nu, spline.nv,
+                        spline.hermite ? "C1 Hermite through the vertices and their normals" : "C2 least squares", fit.max_height_error * 1e6, fit.p90_normal_error * 1e3,
                         fit.max_normal_error * 1e3);
         } else {
             std::printf("the %d x %d vertices of the height map with their normals' slopes (bicubic Hermite "

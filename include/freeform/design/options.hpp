@@ -55,6 +55,15 @@ inline constexpr std::array<EnumName<ExportFormat>, 3> export_format_names{
     {{"mesh", ExportFormat::mesh}, {"step", ExportFormat::step}, {"sag", ExportFormat::sag}}};
 inline std::string_view to_string(ExportFormat f) { return enum_name(f, export_format_names); }
 
+// The spline the STEP part carries (design/pipeline.hpp, step_spline; docs/export.md):
+// "auto" the Hermite one while it stays under about 50 MB, "hermite" the C¹ surface
+// through the vertices and vertex normals (the grid sag table's), "least_squares" the C²
+// fit of the Phong surface, one knot per grid line.
+enum class SplineForm { automatic, hermite, least_squares };
+inline constexpr std::array<EnumName<SplineForm>, 3> spline_form_names{{{"auto", SplineForm::automatic},
+                                                                         {"hermite", SplineForm::hermite},
+                                                                         {"least_squares", SplineForm::least_squares}}};
+
 // The exported part (design/fabrication.hpp, io/forms.hpp).
 struct ExportOptions {
     int subdivisions = 0;     // tessellation level k of the exported mesh; 0 = "auto"
@@ -64,6 +73,7 @@ struct ExportOptions {
     // What a design writes, the first leading its summary; empty: "auto" (STEP and the
     // mesh in builds with Open CASCADE, the mesh alone otherwise; io/forms.hpp).
     std::vector<ExportFormat> formats;
+    SplineForm spline = SplineForm::automatic;  // the STEP part's spline
 };
 
 struct DesignOptions {

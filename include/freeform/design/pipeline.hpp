@@ -145,6 +145,22 @@ struct ExportChecks {
 // nanometre at 2 and does not improve beyond 4 (docs/export.md).
 inline constexpr int spline_samples_per_cell = 4;
 
+// The most poles for which "auto" gives the STEP part the Hermite spline
+// (hermite_bspline, surface/bspline.hpp): about 94 bytes a pole in the file, so under
+// 50 MB (docs/export.md's size goal). Grids up to 353 x 353 vertices fit; larger ones get
+// the least-squares spline, a quarter of the poles.
+inline constexpr std::int64_t hermite_max_poles = 500000;
+
+// The spline the STEP part of `top` (export_blank) carries (optimise.export_spline;
+// docs/export.md, "Which spline"). The Hermite surface keeps the designed cell means
+// better on sharp designs (the vertex normals are the design's own), the least-squares one
+// keeps curvature continuous and has a quarter of the poles.
+inline BSplineSurface step_spline(const Heightmap& top, double alpha, SplineForm form) {
+    const bool fits = std::int64_t(2 * top.nx()) * std::int64_t(2 * top.ny()) <= hermite_max_poles;
+    if (form == SplineForm::hermite || (form == SplineForm::automatic && fits)) return hermite_bspline(top);
+    return fit_bspline(top, alpha, spline_samples_per_cell);
+}
+
 // The designed surface's cell means: the height field traced with its Phong patches.
 inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
                                      const CellMeanOptions& options, int threads) {
@@ -169,7 +185,7 @@ inline ExportChecks check_export(const Scene& scene, const DesignOptions& option
     c.machining = machining_report(scene, surface, c.fabrication.mesh);
     // The smooth forms cover the exported top: a lens's rim too (export_blank).
     const Heightmap top = export_blank(scene, surface);
-    c.spline = fit_bspline(top, scene.surface.phong_alpha, spline_samples_per_cell);
+    c.spline = step_spline(top, scene.surface.phong_alpha, options.exports.spline);
     c.spline_fit = check_spline_fit(c.spline, top, scene.surface.phong_alpha, spline_samples_per_cell);
     c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(options.seed), threads);
 #if defined(FREEFORM_WITH_EMBREE)

@@ -159,7 +159,10 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
         exported["not_traced"] = "built without Embree";
     }
     exported["spline_fit"] = {
-        {"samples_per_cell", c.spline_fit.samples_per_cell},
+        {"form", c.spline.hermite ? "C1 Hermite: the height map's vertices and vertex normals, double knots (the grid "
+                                    "sag table's surface)"
+                                  : "C2 least squares to the Phong surface, one knot per grid line"},
+        {"samples_per_cell", c.spline.hermite ? nlohmann::json(nullptr) : nlohmann::json(c.spline_fit.samples_per_cell)},
         {"poles", {c.spline.nu, c.spline.nv}},
         {"max_height_error_m", c.spline_fit.max_height_error},
         {"rms_height_error_m", c.spline_fit.rms_height_error},

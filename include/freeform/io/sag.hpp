@@ -30,10 +30,11 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "../core/error.hpp"
-#include "../surface/bspline.hpp"  // SplineSample: what eval returns
+#include "../surface/bspline.hpp"  // SplineSample (what eval returns), hermite_corners
 #include "../surface/heightmap.hpp"
 #include "file.hpp"
 #include "mesh.hpp"
@@ -90,34 +91,14 @@ struct GridSag {
 };
 
 // The grid sag table of the height map `hm` (metres, j growing with v): per vertex its
-// height, the slopes of its vertex normal, and the twist d²z/dudv.
-//
-// The twist is the mean of d(z_u)/dv and d(z_v)/du, each a central difference of the
-// vertex slopes (second-order one-sided at the border: line_derivative,
-// surface/heightmap.hpp, the rule of the vertex normals themselves). In the interior both
-// are the same four-point cross difference of the heights, (h(i+1,j+1) − h(i−1,j+1) −
-// h(i+1,j−1) + h(i−1,j−1)) / (4 du dv), exact for a quadratic; at the border the two
-// stencils differ and the mean favours neither axis. A zero twist (Ferguson's patches)
-// would flatten every cell's cross term: wrong on a saddle-like or tilted-paraboloid design.
+// height, the slopes of its vertex normal, and the twist d²z/dudv (hermite_corners,
+// surface/bspline.hpp, which says how the twist is taken).
 inline GridSag grid_sag_of(const Heightmap& hm) {
-    const int nx = hm.nx(), ny = hm.ny();
-    if (nx < 2 || ny < 2) throw InputError("grid sag: the height map has fewer than 2 x 2 vertices");
+    if (hm.nx() < 2 || hm.ny() < 2) throw InputError("grid sag: the height map has fewer than 2 x 2 vertices");
+    HermiteCorners c = hermite_corners(hm);
     GridSag g;
-    g.nx = nx, g.ny = ny, g.dx = hm.du(), g.dy = hm.dv();
-    const std::size_t n = std::size_t(nx) * std::size_t(ny);
-    g.z.resize(n), g.z_x.resize(n), g.z_y.resize(n), g.z_xy.resize(n);
-    for (std::size_t k = 0; k < n; ++k) {
-        const Vec3d nv = Vec3d(hm.normals()[k]);
-        g.z[k] = double(hm.heights()[k]);
-        g.z_x[k] = -nv.x / nv.z, g.z_y[k] = -nv.y / nv.z;
-    }
-    const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
-    for (int j = 0; j < ny; ++j)
-        for (int i = 0; i < nx; ++i) {
-            const double sxy = line_derivative([&](int jj) { return g.z_x[at(i, jj)]; }, j, ny, g.dy);
-            const double syx = line_derivative([&](int ii) { return g.z_y[at(ii, j)]; }, i, nx, g.dx);
-            g.z_xy[at(i, j)] = 0.5 * (sxy + syx);
-        }
+    g.nx = hm.nx(), g.ny = hm.ny(), g.dx = hm.du(), g.dy = hm.dv();
+    g.z = std::move(c.z), g.z_x = std::move(c.z_u), g.z_y = std::move(c.z_v), g.z_xy = std::move(c.z_uv);
     return g;
 }
 

@@ -800,6 +800,9 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"export_tolerance", &field<&S::exports, &ExportOptions::tolerance>, 0.01, 10},
         {"export_max_triangles", &field<&S::exports, &ExportOptions::max_triangles>, 1000, 1'000'000'000},
         {.name = "export_formats", .read = read_export_formats, .write = write_export_formats},
+        {.name = "export_spline",
+         .read = read_enum_key<spline_form_names, &S::exports, &ExportOptions::spline>,
+         .write = write_enum_key<spline_form_names, &S::exports, &ExportOptions::spline>},
     };
     return table;
 }

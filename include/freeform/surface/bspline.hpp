@@ -33,6 +33,7 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -141,6 +142,7 @@ struct BSplineSurface {
     int nu = 0, nv = 0;                    // poles per direction
     Frame frame;                           // surface frame → world
     Aperture aperture = Aperture::rect;    // the design's aperture (the spline covers the rectangle)
+    bool hermite = false;                  // made by hermite_bspline (else fit_bspline)
 
     double u_min() const { return knots_u.front(); }
     double u_max() const { return knots_u.back(); }
@@ -169,6 +171,91 @@ struct BSplineSurface {
         return s;
     }
 };
+
+// The corner data of the C¹ bicubic Hermite surface through a height map's vertices: per
+// vertex (row-major, j·nx + i) its height, the slopes of its vertex normal
+// (Heightmap::normals(), the normals the Phong patches are built from; slope = −n_u/n_w,
+// −n_v/n_w) and the twist ∂²z/∂u∂v. What the grid sag table holds (io/sag.hpp) and, for
+// grids small enough, what the STEP part carries (hermite_bspline).
+//
+// The twist is the mean of ∂(z_u)/∂v and ∂(z_v)/∂u, each a central difference of the
+// vertex slopes (second-order one-sided at the border: line_derivative,
+// surface/heightmap.hpp, the rule of the vertex normals themselves). In the interior both
+// are the same four-point cross difference of the heights, (h(i+1,j+1) − h(i−1,j+1) −
+// h(i+1,j−1) + h(i−1,j−1)) / (4 du dv), exact for a quadratic; at the border the two
+// stencils differ and the mean favours neither axis. A zero twist (Ferguson's patches)
+// would flatten every cell's cross term: wrong on a saddle-like or tilted-paraboloid design.
+struct HermiteCorners {
+    int nx = 0, ny = 0;
+    std::vector<double> z, z_u, z_v, z_uv;
+};
+inline HermiteCorners hermite_corners(const Heightmap& hm) {
+    const int nx = hm.nx(), ny = hm.ny();
+    HermiteCorners c;
+    c.nx = nx, c.ny = ny;
+    const std::size_t n = std::size_t(nx) * std::size_t(ny);
+    c.z.resize(n), c.z_u.resize(n), c.z_v.resize(n), c.z_uv.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        const Vec3d nv = Vec3d(hm.normals()[k]);
+        c.z[k] = double(hm.heights()[k]);
+        c.z_u[k] = -nv.x / nv.z, c.z_v[k] = -nv.y / nv.z;
+    }
+    const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            const double suv = line_derivative([&](int jj) { return c.z_u[at(i, jj)]; }, j, ny, hm.dv());
+            const double svu = line_derivative([&](int ii) { return c.z_v[at(ii, j)]; }, i, nx, hm.du());
+            c.z_uv[at(i, j)] = 0.5 * (suv + svu);
+        }
+    return c;
+}
+
+// The C¹ bicubic Hermite surface of hermite_corners as a B-spline, exactly: double knots
+// at the interior grid lines (so each cell is one bicubic Bézier patch, 2·nx poles along u),
+// the poles the patches' Bézier nets. Along one direction, a cell from vertex a to a + 1
+// of spacing h has the Bézier points z_a, z_a + h z'_a / 3, z_{a+1} − h z'_{a+1} / 3,
+// z_{a+1}; neighbouring cells share their end points, which are then the midpoints of
+// the poles either side (C¹ with equal spans), so the poles are each cell's two inner
+// points plus the two ends: pole p stands for vertex 0 (p = 0), vertex nx − 1
+// (p = 2nx − 1), or vertex (p − 1) / 2 with +h/3 (p odd) and vertex p / 2 with −h/3
+// (p even). A pole of the tensor net adds the two directions' offsets and their product
+// times the twist. The poles' (u, v) are again the Greville abscissae.
+inline BSplineSurface hermite_bspline(const Heightmap& hm) {
+    if (hm.nx() < 2 || hm.ny() < 2) throw InputError("cannot make a spline of an empty height map");
+    const HermiteCorners c = hermite_corners(hm);
+    const auto knots = [](double lo, double hi, int vertices) {
+        std::vector<double> k(4, lo);
+        for (int g = 1; g + 1 < vertices; ++g) k.insert(k.end(), 2, lo + (hi - lo) * double(g) / (vertices - 1));
+        k.insert(k.end(), 4, hi);
+        return k;
+    };
+    // Pole p of a direction of `vertices` vertices: (vertex, offset in spacings).
+    const auto stands_for = [](int p, int vertices) -> std::pair<int, double> {
+        if (p == 0) return {0, 0.0};
+        if (p == 2 * vertices - 1) return {vertices - 1, 0.0};
+        return p % 2 == 1 ? std::pair{(p - 1) / 2, 1.0 / 3.0} : std::pair{p / 2, -1.0 / 3.0};
+    };
+    BSplineSurface s;
+    s.frame = hm.frame();
+    s.aperture = hm.aperture();
+    s.knots_u = knots(hm.u_of(0), hm.u_of(hm.nx() - 1), hm.nx());
+    s.knots_v = knots(hm.v_of(0), hm.v_of(hm.ny() - 1), hm.ny());
+    s.nu = 2 * hm.nx(), s.nv = 2 * hm.ny();
+    s.hermite = true;
+    s.pole_u = bspline_detail::greville(s.knots_u);
+    s.pole_v = bspline_detail::greville(s.knots_v);
+    s.z.resize(std::size_t(s.nu) * std::size_t(s.nv));
+    for (int q = 0; q < s.nv; ++q)
+        for (int p = 0; p < s.nu; ++p) {
+            const auto [i, a] = stands_for(p, hm.nx());
+            const auto [j, b] = stands_for(q, hm.ny());
+            const std::size_t k = std::size_t(j) * std::size_t(hm.nx()) + std::size_t(i);
+            const double du = a * hm.du(), dv = b * hm.dv();
+            s.z[std::size_t(q) * std::size_t(s.nu) + std::size_t(p)] =
+                c.z[k] + du * c.z_u[k] + dv * c.z_v[k] + du * dv * c.z_uv[k];
+        }
+    return s;
+}
 
 // The spline's point and normal at cell-local (a, b) of the grid cell (ci, cj) of `hm`
 // (the grid the spline was fitted on): the `point` of detail::tessellate_local and
