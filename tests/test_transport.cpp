@@ -580,3 +580,27 @@ TEST_CASE("transport start: a picture that fills the receiver lights its dark ed
     REQUIRE(st.report.used == StartKind::transport);
     CHECK(worst_edge_ratio(s, st.surface, target) > 0.8);
 }
+
+TEST_CASE("transport start: under a point light each vertex is aimed by the ray that meets it (raised and lowered edges)") {
+    // The rays are aimed at the aperture in the plane w = 0 (scene/rays.hpp). Under a point
+    // light 0.2 m above a lens whose smooth, sloping target tilts its face, one edge of the
+    // face stands above that plane (the rays aimed at the aperture's edge meet the face a
+    // fraction of a cell inside it, and no ray lights the rim) and the opposite edge below
+    // it (the rays aimed at the aperture's last strip pass beside the face). With each
+    // vertex aimed as if its ray came through the point below it, an edge column got 61 %
+    // of its light here (a third on a terrain picture); with the goal of the ray that
+    // really meets it, and the lit part of each line of vertices stretched over the map,
+    // 98 %.
+    ImageD target = smooth_target(100);
+    for (int x = 0; x < 100; ++x) target.col(x) *= 2.5 - 0.02 * x;  // brighter on the left: a tilted face
+    Scene s = lens_scene(0.2);
+    s.light.shape = PointLight{{0, 0, 0.2}, {0, 0, 0}, {}};
+    s.surface.size = {0.08, 0.08};
+    const DesignStart st = make_design_start(s, testing::surface_for(s, 201), target, 3, 2);
+    REQUIRE(st.report.used == StartKind::transport);
+    const auto column = [&](int i) { return double(st.surface(i, 100)); };
+    MESSAGE("edge heights " << column(0) * 1e3 << " mm and " << column(200) * 1e3 << " mm; worst edge ratio "
+                            << worst_edge_ratio(s, st.surface, target));
+    CHECK(std::abs(column(0) - column(200)) > 0.001);  // the face is tilted: the case this is about
+    CHECK(worst_edge_ratio(s, st.surface, target) > 0.85);
+}
