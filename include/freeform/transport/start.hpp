@@ -582,6 +582,70 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     return m;
 }
 
+namespace transport_detail {
+
+// The rays are aimed at the aperture's points in the plane w = 0 (scene/rays.hpp), so the
+// ray that meets vertex (u, v) at height h came through the plane point where its
+// incoming line crosses w = 0: a point light's ray through a raised edge vertex was aimed
+// beyond the aperture, and no ray lights the rim of the face there (a strip of u·h/d;
+// 0.25 mm of a 0.4 mm cell for a lens edge 1.3 mm up under a point 0.2 m above: its
+// receiver column got a third of its light). So from the second fit round on, each
+// vertex takes the goal of the plane point its ray came through: the light goes where
+// the map sends the rays that really meet the surface there. Light along the surface's
+// normal meets it where it was aimed, and its goals do not change. An elliptical
+// aperture keeps the plain goals: its lines of vertices do not end at the rectangle's
+// edges, where the stretch is taken (with the goals moved but not stretched the
+// point-light example's start went 0.0347 → 0.0351; docs/architecture.md §4b).
+inline bool rays_shift_with_height(const Optics& optics, const Heightmap& hm) {
+    return hm.aperture() == Aperture::rect &&
+           (optics.light != 0 || optics.direction.x != 0 || optics.direction.y != 0);
+}
+
+// Each vertex's goal (surface frame) and whether the map reaches it; returns the
+// fraction of active vertices it does not. Without `heights`, the goal of the plane
+// point below the vertex; with them, of the plane point its ray came through, each line
+// of vertices' lit plane interval stretched over the aperture: where an edge vertex's
+// ray came from inside the rectangle, the rays aimed beyond it miss the face, and the
+// stretch gives the edge vertex the edge's goal again (clamped where the interval
+// reaches beyond the rectangle: the raised edge's unlit rim).
+inline double vertex_goals(const Optics& optics, const TransportMap& map, const Heightmap& hm,
+                           const std::vector<std::uint8_t>& active, const Eigen::ArrayXXd* heights,
+                           std::vector<Vec3d>& goal, std::vector<std::uint8_t>& mapped) {
+    const int nx = hm.nx(), ny = hm.ny();
+    const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
+    Eigen::ArrayXXd pu(ny, nx), pv(ny, nx);  // each vertex's ray's plane point
+    if (heights)
+        for (int j = 0; j < ny; ++j)
+            for (int i = 0; i < nx; ++i) {
+                const Vec3d s{hm.u_of(i), hm.v_of(j), (*heights)(j, i)};
+                const Vec3d d = optics.incoming(s);
+                const Vec3d q = d.z < 0 ? s - (s.z / d.z) * d : Vec3d{s.x, s.y, 0};
+                pu(j, i) = q.x, pv(j, i) = q.y;
+            }
+    int unmapped = 0, active_count = 0;
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            const std::size_t p = std::size_t(j * nx + i);
+            active_count += active[p];
+            Vec3d at{hm.u_of(i), hm.v_of(j), 0};
+            if (heights) {
+                const double lu = std::max(pu(j, 0), u0), hu = std::min(pu(j, nx - 1), u1);
+                const double lv = std::max(pv(0, i), v0), hv = std::min(pv(ny - 1, i), v1);
+                if (hu > lu && hv > lv)
+                    at = {u0 + (std::clamp(pu(j, i), lu, hu) - lu) / (hu - lu) * (u1 - u0),
+                          v0 + (std::clamp(pv(j, i), lv, hv) - lv) / (hv - lv) * (v1 - v0), 0};
+            }
+            const auto g = aim(optics, map.strips, map.ot, at);
+            mapped[p] = g ? 1 : 0;
+            if (g) goal[p] = *g;
+            else unmapped += active[p];
+        }
+    extrapolate_border_aims(goal, mapped, nx, ny, optics, map.ot);
+    return active_count > 0 ? double(unmapped) / active_count : 0;
+}
+
+}  // namespace transport_detail
+
 // The surface of `nx × ny` vertices (placed like `like`) that realises the map.
 inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& map, int nx, int ny,
                                         TransportReport& report, const TransportOptions& options = {}) {
@@ -595,57 +659,8 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     std::vector<Vec3d> goal(static_cast<std::size_t>(n));
     std::vector<std::uint8_t> mapped(std::size_t(n), 0);
     const std::vector<std::uint8_t> active = transport_detail::active_vertices(hm);
-    // The rays are aimed at the aperture's points in the plane w = 0 (scene/rays.hpp), so
-    // the ray that meets vertex (u, v) at height h came through the plane point where its
-    // incoming line crosses w = 0: a point light's ray through a raised edge vertex was
-    // aimed beyond the aperture, and no ray lights the rim of the face there (a strip of
-    // u·h/d; 0.25 mm of a 0.4 mm cell for a lens edge 1.3 mm up under a point 0.2 m
-    // above: its receiver column got a third of its light). So from the second fit round
-    // on, each vertex takes the goal of the plane point its ray came through: the light
-    // goes where the map sends the rays that really meet the surface there. Light along
-    // the surface's normal meets it where it was aimed, and its goals do not change. An
-    // elliptical aperture keeps the plain goals: its lines of vertices do not end at the
-    // rectangle's edges, where the stretch below is taken (with the goals moved but not
-    // stretched the point-light example's start went 0.0347 → 0.0351;
-    // docs/architecture.md §4b).
-    const bool shifted_rays = hm.aperture() == Aperture::rect &&
-                              (optics.light != 0 || optics.direction.x != 0 || optics.direction.y != 0);
-    const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
-    Eigen::ArrayXXd pu(ny, nx), pv(ny, nx);  // each vertex's ray's plane point
-    const auto set_goals = [&](const Eigen::ArrayXXd* heights) {
-        if (heights)
-            for (int j = 0; j < ny; ++j)
-                for (int i = 0; i < nx; ++i) {
-                    const Vec3d s{hm.u_of(i), hm.v_of(j), (*heights)(j, i)};
-                    const Vec3d d = optics.incoming(s);
-                    const Vec3d q = d.z < 0 ? s - (s.z / d.z) * d : Vec3d{s.x, s.y, 0};
-                    pu(j, i) = q.x, pv(j, i) = q.y;
-                }
-        int unmapped = 0, active_count = 0;
-        for (int j = 0; j < ny; ++j)
-            for (int i = 0; i < nx; ++i) {
-                const std::size_t p = std::size_t(j * nx + i);
-                active_count += active[p];
-                Vec3d at{hm.u_of(i), hm.v_of(j), 0};
-                if (heights) {
-                    // Where an edge vertex's ray came from inside the rectangle, the rays
-                    // aimed beyond it miss the face: the line's lit plane interval is
-                    // stretched over the whole, so the edge vertex keeps the edge's goal.
-                    const double lu = std::max(pu(j, 0), u0), hu = std::min(pu(j, nx - 1), u1);
-                    const double lv = std::max(pv(0, i), v0), hv = std::min(pv(ny - 1, i), v1);
-                    if (hu > lu && hv > lv)
-                        at = {u0 + (std::clamp(pu(j, i), lu, hu) - lu) / (hu - lu) * (u1 - u0),
-                              v0 + (std::clamp(pv(j, i), lv, hv) - lv) / (hv - lv) * (v1 - v0), 0};
-                }
-                const auto g = transport_detail::aim(optics, map.strips, map.ot, at);
-                mapped[p] = g ? 1 : 0;
-                if (g) goal[p] = *g;
-                else unmapped += active[p];
-            }
-        transport_detail::extrapolate_border_aims(goal, mapped, nx, ny, optics, map.ot);
-        return active_count > 0 ? double(unmapped) / active_count : 0;
-    };
-    report.unmapped_fraction = set_goals(nullptr);
+    const bool shifted_rays = transport_detail::rays_shift_with_height(optics, hm);
+    report.unmapped_fraction = transport_detail::vertex_goals(optics, map, hm, active, nullptr, goal, mapped);
 
     // Heights whose edge difference quotients best match the mean slope of each edge's
     // ends, in least squares: the normal equations are a Neumann Poisson problem on the
@@ -659,7 +674,7 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     const double bound_mid = 0.5 * (double(spec.h_min) + double(spec.h_max));
     const double bound_range = double(spec.h_max) - double(spec.h_min);
     for (int round = 0; round < std::max(1, options.fit_iterations); ++round) {
-        if (round > 0 && shifted_rays) set_goals(&h);
+        if (round > 0 && shifted_rays) transport_detail::vertex_goals(optics, map, hm, active, &h, goal, mapped);
         for (int j = 0; j < ny; ++j)
             for (int i = 0; i < nx; ++i) {
                 const std::size_t p = std::size_t(j * nx + i);
