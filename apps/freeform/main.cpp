@@ -767,8 +767,8 @@ int run_export(const ExportArgs& a) {
             std::printf("a bicubic B-spline of %d x %d poles (%s) within %.2g um (max) of the designed surface, "
                         "normals within %.3f mrad (90th percentile), %.2f mrad (max)\n",
                         spline.nu, spline.nv,
-                        spline.hermite ? "C1 Hermite through the vertices and their normals" : "C2 least squares", fit.max_height_error * 1e6, fit.p90_normal_error * 1e3,
-                        fit.max_normal_error * 1e3);
+                        spline.hermite ? "C1 Hermite through the vertices and their normals" : "C2 least squares",
+                        fit.max_height_error * 1e6, fit.p90_normal_error * 1e3, fit.max_normal_error * 1e3);
         } else {
             std::printf("the %d x %d vertices of the height map with their normals' slopes (bicubic Hermite "
                         "between them)\n",

@@ -58,12 +58,13 @@ namespace bspline_detail {
 inline constexpr int degree = 3;
 
 // The clamped knot vector of `spans` equal spans over [lo, hi]: four equal knots at each
-// end, one at each interior grid line.
-inline std::vector<double> clamped_knots(double lo, double hi, int spans) {
+// end, `interior` equal knots (1: C², 2: C¹) at each interior grid line.
+inline std::vector<double> clamped_knots(double lo, double hi, int spans, int interior = 1) {
     std::vector<double> k;
-    k.reserve(std::size_t(spans) + 7);
+    k.reserve(std::size_t(spans) * std::size_t(interior) + 8);
     for (int m = 0; m < degree; ++m) k.push_back(lo);
-    for (int s = 0; s <= spans; ++s) k.push_back(s == spans ? hi : lo + (hi - lo) * double(s) / spans);
+    for (int s = 0; s <= spans; ++s)
+        k.insert(k.end(), s == 0 || s == spans ? 1 : interior, s == spans ? hi : lo + (hi - lo) * double(s) / spans);
     for (int m = 0; m < degree; ++m) k.push_back(hi);
     return k;
 }
@@ -186,13 +187,11 @@ struct BSplineSurface {
 // stencils differ and the mean favours neither axis. A zero twist (Ferguson's patches)
 // would flatten every cell's cross term: wrong on a saddle-like or tilted-paraboloid design.
 struct HermiteCorners {
-    int nx = 0, ny = 0;
     std::vector<double> z, z_u, z_v, z_uv;
 };
 inline HermiteCorners hermite_corners(const Heightmap& hm) {
     const int nx = hm.nx(), ny = hm.ny();
     HermiteCorners c;
-    c.nx = nx, c.ny = ny;
     const std::size_t n = std::size_t(nx) * std::size_t(ny);
     c.z.resize(n), c.z_u.resize(n), c.z_v.resize(n), c.z_uv.resize(n);
     for (std::size_t k = 0; k < n; ++k) {
@@ -223,12 +222,6 @@ inline HermiteCorners hermite_corners(const Heightmap& hm) {
 inline BSplineSurface hermite_bspline(const Heightmap& hm) {
     if (hm.nx() < 2 || hm.ny() < 2) throw InputError("cannot make a spline of an empty height map");
     const HermiteCorners c = hermite_corners(hm);
-    const auto knots = [](double lo, double hi, int vertices) {
-        std::vector<double> k(4, lo);
-        for (int g = 1; g + 1 < vertices; ++g) k.insert(k.end(), 2, lo + (hi - lo) * double(g) / (vertices - 1));
-        k.insert(k.end(), 4, hi);
-        return k;
-    };
     // Pole p of a direction of `vertices` vertices: (vertex, offset in spacings).
     const auto stands_for = [](int p, int vertices) -> std::pair<int, double> {
         if (p == 0) return {0, 0.0};
@@ -238,8 +231,8 @@ inline BSplineSurface hermite_bspline(const Heightmap& hm) {
     BSplineSurface s;
     s.frame = hm.frame();
     s.aperture = hm.aperture();
-    s.knots_u = knots(hm.u_of(0), hm.u_of(hm.nx() - 1), hm.nx());
-    s.knots_v = knots(hm.v_of(0), hm.v_of(hm.ny() - 1), hm.ny());
+    s.knots_u = bspline_detail::clamped_knots(hm.u_of(0), hm.u_of(hm.nx() - 1), hm.nx() - 1, 2);
+    s.knots_v = bspline_detail::clamped_knots(hm.v_of(0), hm.v_of(hm.ny() - 1), hm.ny() - 1, 2);
     s.nu = 2 * hm.nx(), s.nv = 2 * hm.ny();
     s.hermite = true;
     s.pole_u = bspline_detail::greville(s.knots_u);

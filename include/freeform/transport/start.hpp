@@ -612,9 +612,10 @@ inline double vertex_goals(const Optics& optics, const TransportMap& map, const 
                            const std::vector<std::uint8_t>& active, const Eigen::ArrayXXd* heights,
                            std::vector<Vec3d>& goal, std::vector<std::uint8_t>& mapped) {
     const int nx = hm.nx(), ny = hm.ny();
-    const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
-    Eigen::ArrayXXd pu(ny, nx), pv(ny, nx);  // each vertex's ray's plane point
-    if (heights)
+    // With heights, each vertex's ray's plane point.
+    Eigen::ArrayXXd pu, pv;
+    if (heights) {
+        pu.resize(ny, nx), pv.resize(ny, nx);
         for (int j = 0; j < ny; ++j)
             for (int i = 0; i < nx; ++i) {
                 const Vec3d s{hm.u_of(i), hm.v_of(j), (*heights)(j, i)};
@@ -622,19 +623,21 @@ inline double vertex_goals(const Optics& optics, const TransportMap& map, const 
                 const Vec3d q = d.z < 0 ? s - (s.z / d.z) * d : Vec3d{s.x, s.y, 0};
                 pu(j, i) = q.x, pv(j, i) = q.y;
             }
+    }
+    // x of the line whose rays come through [max(lo, a0), min(hi, a1)], stretched over [a0, a1].
+    const auto stretch = [](double x, double lo, double hi, double a0, double a1) {
+        lo = std::max(lo, a0), hi = std::min(hi, a1);
+        return hi > lo ? a0 + (std::clamp(x, lo, hi) - lo) / (hi - lo) * (a1 - a0) : x;
+    };
+    const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
     int unmapped = 0, active_count = 0;
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
             const std::size_t p = std::size_t(j * nx + i);
             active_count += active[p];
-            Vec3d at{hm.u_of(i), hm.v_of(j), 0};
-            if (heights) {
-                const double lu = std::max(pu(j, 0), u0), hu = std::min(pu(j, nx - 1), u1);
-                const double lv = std::max(pv(0, i), v0), hv = std::min(pv(ny - 1, i), v1);
-                if (hu > lu && hv > lv)
-                    at = {u0 + (std::clamp(pu(j, i), lu, hu) - lu) / (hu - lu) * (u1 - u0),
-                          v0 + (std::clamp(pv(j, i), lv, hv) - lv) / (hv - lv) * (v1 - v0), 0};
-            }
+            const Vec3d at = heights ? Vec3d{stretch(pu(j, i), pu(j, 0), pu(j, nx - 1), u0, u1),
+                                             stretch(pv(j, i), pv(0, i), pv(ny - 1, i), v0, v1), 0}
+                                     : Vec3d{hm.u_of(i), hm.v_of(j), 0};
             const auto g = aim(optics, map.strips, map.ot, at);
             mapped[p] = g ? 1 : 0;
             if (g) goal[p] = *g;
