@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -112,26 +113,37 @@ inline bool starts_from_transport(const Scene& scene) {
 // tilts its edge rays outwards inside the glass; in a body no wider than the face they
 // meet a side wall, which mirrors them back across the receiver (the bright cross of a
 // lens whose receiver is larger than it). "auto" takes the largest drift inside the glass
-// of a ray from a corner of the face, at the top of the height bounds, to a corner of the
+// of a ray from the face's edge, at the top of the height bounds, to a corner of the
 // receiver: the exit point on the back face that the back face's refraction aims at the
-// receiver corner, solved by fixed point. A quarter more for the rays the design aims
+// receiver corner, solved by fixed point. The face's edge is its four corners, or for an
+// elliptical aperture 16 points around the ellipse (its body is the rectangle around it,
+// which the ellipse meets at the ends of its axes: there its rays drift into the walls as
+// a rectangular face's do, and the start aimed wall strips whose light drew a square
+// outline on a round lens's uniform target). A quarter more for the rays the design aims
 // past the receiver's edge, rounded up to half a millimetre; 0 when no such ray drifts
-// outwards (a receiver no wider than the face) and for an elliptical aperture (whose body
-// is the rectangle around it).
+// outwards (a receiver no wider than the face).
 inline double lens_rim(const Scene& scene) {
     const auto* lens = std::get_if<Lens>(&scene.surface.material);
     if (!lens) return 0;
     if (lens->rim >= 0) return lens->rim;
     const SurfaceSpec& sf = scene.surface;
-    if (sf.aperture != Aperture::rect) return 0;
     const double hu = 0.5 * sf.size.x, hv = 0.5 * sf.size.y, n = lens->ior;
     const Receiver& r = scene.receiver;
+    std::vector<Vec3d> edge;
+    if (sf.aperture == Aperture::rect) {
+        for (int k = 0; k < 4; ++k) edge.push_back({k & 1 ? hu : -hu, k & 2 ? hv : -hv, sf.h_max});
+    } else {
+        constexpr int points = 16;
+        for (int k = 0; k < points; ++k) {
+            const double a = 2 * std::numbers::pi * k / points;
+            edge.push_back({hu * std::cos(a), hv * std::sin(a), sf.h_max});
+        }
+    }
     double drift = 0;
     for (int c = 0; c < 4; ++c) {
         const Vec3d q = sf.frame.to_local(r.frame.origin + (c & 1 ? 0.5 : -0.5) * r.size.x * r.frame.u +
                                           (c & 2 ? 0.5 : -0.5) * r.size.y * r.frame.v);
-        for (int k = 0; k < 4; ++k) {
-            const Vec3d s{k & 1 ? hu : -hu, k & 2 ? hv : -hv, sf.h_max};
+        for (const Vec3d& s : edge) {
             Vec3d e{s.x, s.y, -lens->thickness};
             for (int it = 0; it < 8; ++it) {
                 const Vec3d out = normalize(q - e);

@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <variant>
@@ -593,12 +594,70 @@ namespace transport_detail {
 // vertex takes the goal of the plane point its ray came through: the light goes where
 // the map sends the rays that really meet the surface there. Light along the surface's
 // normal meets it where it was aimed, and its goals do not change. An elliptical
-// aperture keeps the plain goals: its lines of vertices do not end at the rectangle's
-// edges, where the stretch is taken (with the goals moved but not stretched the
-// point-light example's start went 0.0347 → 0.0351; docs/architecture.md §4b).
+// aperture takes the radial stretch (radial_plane_stretch) under a point or disk light,
+// and keeps the plain goals under oblique collimated light: there a terrain on a round
+// mirror went 0.0371 → 0.0419 with the goals moved (docs/performance.md).
 inline bool rays_shift_with_height(const Optics& optics, const Heightmap& hm) {
-    return hm.aperture() == Aperture::rect &&
-           (optics.light != 0 || optics.direction.x != 0 || optics.direction.y != 0);
+    if (hm.aperture() != Aperture::rect) return optics.light != 0;
+    return optics.light != 0 || optics.direction.x != 0 || optics.direction.y != 0;
+}
+
+// The radial form of the per-line stretch below, for an elliptical aperture, whose lines
+// of vertices do not end at the rectangle's edges. In coordinates scaled so that the
+// aperture is the unit disk around its centre, a boundary vertex (active, beside an
+// inactive one) at radius r whose ray came through the plane at radius r' says that, in
+// its direction, the face's lit region reaches R = r' / r of the aperture (the face's
+// rim is raised where R > 1, lowered where R < 1). R is averaged in 64 sectors (an empty
+// sector takes its nearest filled ones, interpolated), interpolated between them, and
+// every plane point's radius divided by min(R, 1): a lowered rim's lit region is
+// stretched over the aperture, and a raised rim's unlit vertices keep plane points
+// beyond it, where the map continues.
+inline void radial_plane_stretch(const Heightmap& hm, const std::vector<std::uint8_t>& active, Eigen::ArrayXXd& pu,
+                                 Eigen::ArrayXXd& pv) {
+    const int nx = hm.nx(), ny = hm.ny();
+    constexpr int sectors = 64;
+    const double cu = 0.5 * (hm.u_of(0) + hm.u_of(nx - 1)), cv = 0.5 * (hm.v_of(0) + hm.v_of(ny - 1));
+    const double a = 0.5 * (hm.u_of(nx - 1) - hm.u_of(0)), b = 0.5 * (hm.v_of(ny - 1) - hm.v_of(0));
+    if (!(a > 0 && b > 0)) return;
+    const auto sector_of = [&](double x, double y) {
+        const double t = (std::atan2(y, x) + std::numbers::pi) / (2 * std::numbers::pi) * sectors;
+        return std::clamp(t, 0.0, double(sectors) - 1e-9);
+    };
+    std::array<double, sectors> sum{}, count{};
+    const auto on = [&](int i, int j) { return i >= 0 && j >= 0 && i < nx && j < ny && active[std::size_t(j * nx + i)]; };
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            if (!on(i, j) || (on(i - 1, j) && on(i + 1, j) && on(i, j - 1) && on(i, j + 1))) continue;
+            const double x = (hm.u_of(i) - cu) / a, y = (hm.v_of(j) - cv) / b, r = std::hypot(x, y);
+            if (!(r > 0.5)) continue;
+            const int k = int(sector_of(x, y));
+            sum[std::size_t(k)] += std::hypot((pu(j, i) - cu) / a, (pv(j, i) - cv) / b) / r;
+            count[std::size_t(k)] += 1;
+        }
+    std::array<double, sectors> reach{};
+    for (int k = 0; k < sectors; ++k) {
+        if (count[std::size_t(k)] > 0) {
+            reach[std::size_t(k)] = sum[std::size_t(k)] / count[std::size_t(k)];
+            continue;
+        }
+        int lo = 1, hi = 1;  // distances to the nearest filled sectors on either side
+        while (lo < sectors && count[std::size_t((k - lo + sectors) % sectors)] == 0) ++lo;
+        while (hi < sectors && count[std::size_t((k + hi) % sectors)] == 0) ++hi;
+        if (lo >= sectors) return;  // no boundary vertex at all
+        const double rl = sum[std::size_t((k - lo + sectors) % sectors)] / count[std::size_t((k - lo + sectors) % sectors)];
+        const double rh = sum[std::size_t((k + hi) % sectors)] / count[std::size_t((k + hi) % sectors)];
+        reach[std::size_t(k)] = (rl * hi + rh * lo) / (lo + hi);
+    }
+    for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+            const double x = (pu(j, i) - cu) / a, y = (pv(j, i) - cv) / b;
+            const double t = sector_of(x, y) - 0.5;  // sector centres at k + 0.5
+            const int k0 = int(std::floor(t));
+            const double f = t - k0;
+            const double r = (1 - f) * reach[std::size_t((k0 + sectors) % sectors)] + f * reach[std::size_t((k0 + 1) % sectors)];
+            const double scale = 1 / std::min(r, 1.0);
+            pu(j, i) = cu + a * x * scale, pv(j, i) = cv + b * y * scale;
+        }
 }
 
 // A raised rim: the first k vertices of a line (counted inwards from the face's edge)
@@ -659,21 +718,24 @@ inline double vertex_goals(const Optics& optics, const TransportMap& map, const 
         return hi > lo ? a0 + (std::clamp(x, lo, hi) - lo) / (hi - lo) * (a1 - a0) : x;
     };
     const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
+    const bool rect = hm.aperture() == Aperture::rect;
+    if (heights && !rect) radial_plane_stretch(hm, active, pu, pv);
     int unmapped = 0, active_count = 0;
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
             const std::size_t p = std::size_t(j * nx + i);
             active_count += active[p];
-            const Vec3d at = heights ? Vec3d{stretch(pu(j, i), pu(j, 0), pu(j, nx - 1), u0, u1),
-                                             stretch(pv(j, i), pv(0, i), pv(ny - 1, i), v0, v1), 0}
-                                     : Vec3d{hm.u_of(i), hm.v_of(j), 0};
+            const Vec3d at = !heights ? Vec3d{hm.u_of(i), hm.v_of(j), 0}
+                             : rect   ? Vec3d{stretch(pu(j, i), pu(j, 0), pu(j, nx - 1), u0, u1),
+                                            stretch(pv(j, i), pv(0, i), pv(ny - 1, i), v0, v1), 0}
+                                      : Vec3d{pu(j, i), pv(j, i), 0};
             const auto g = aim(optics, map.strips, map.ot, at);
             mapped[p] = g ? 1 : 0;
             if (g) goal[p] = *g;
             else unmapped += active[p];
         }
     extrapolate_border_aims(goal, mapped, nx, ny, optics, map.ot);
-    if (heights) {
+    if (heights && rect) {
         const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
         for (int j = 0; j < ny; ++j) {
             raised_rim_goals(goal, mapped, nx, [&](int t) { return at(t, j); }, [&](int t) { return pu(j, t) - u0; });
