@@ -542,11 +542,6 @@ TEST_CASE("transport start: a lens that spreads its light wider than itself thro
     CHECK(lens_rim(round) == doctest::Approx(0.0025));  // the drift from the axes' ends
     const TransportReport circle = check(round, "round lens, receiver twice its size", 3);
     CHECK(circle.wall_fraction == 0);
-    Lens& glass = std::get<Lens>(round.surface.material);
-    glass.rim = 0;
-    const DesignStart walled = make_design_start(round, testing::surface_for(round, 101), target, 3, 2);
-    MESSAGE("round lens, rim 0: worst row and column " << worst_row_column(round, walled.surface, target, 3).first << ", "
-                                                     << worst_row_column(round, walled.surface, target, 3).second);
 
     // Converging light stays inside the face's walls: no rim. Its outermost rows and
     // columns included: with the two-point border normal they were 29 % and 16 % short,
