@@ -634,19 +634,15 @@ inline void radial_plane_stretch(const Heightmap& hm, const std::vector<std::uin
             sum[std::size_t(k)] += std::hypot((pu(j, i) - cu) / a, (pv(j, i) - cv) / b) / r;
             count[std::size_t(k)] += 1;
         }
+    const auto wrap = [](int k) { return std::size_t((k % sectors + sectors) % sectors); };
     std::array<double, sectors> reach{};
     for (int k = 0; k < sectors; ++k) {
-        if (count[std::size_t(k)] > 0) {
-            reach[std::size_t(k)] = sum[std::size_t(k)] / count[std::size_t(k)];
-            continue;
-        }
-        int lo = 1, hi = 1;  // distances to the nearest filled sectors on either side
-        while (lo < sectors && count[std::size_t((k - lo + sectors) % sectors)] == 0) ++lo;
-        while (hi < sectors && count[std::size_t((k + hi) % sectors)] == 0) ++hi;
+        int lo = 0, hi = 0;  // distances to the nearest filled sectors on either side (0: filled)
+        while (lo < sectors && count[wrap(k - lo)] == 0) ++lo;
         if (lo >= sectors) return;  // no boundary vertex at all
-        const double rl = sum[std::size_t((k - lo + sectors) % sectors)] / count[std::size_t((k - lo + sectors) % sectors)];
-        const double rh = sum[std::size_t((k + hi) % sectors)] / count[std::size_t((k + hi) % sectors)];
-        reach[std::size_t(k)] = (rl * hi + rh * lo) / (lo + hi);
+        while (count[wrap(k + hi)] == 0) ++hi;
+        const double rl = sum[wrap(k - lo)] / count[wrap(k - lo)], rh = sum[wrap(k + hi)] / count[wrap(k + hi)];
+        reach[std::size_t(k)] = lo + hi == 0 ? rl : (rl * hi + rh * lo) / (lo + hi);
     }
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
@@ -654,7 +650,7 @@ inline void radial_plane_stretch(const Heightmap& hm, const std::vector<std::uin
             const double t = sector_of(x, y) - 0.5;  // sector centres at k + 0.5
             const int k0 = int(std::floor(t));
             const double f = t - k0;
-            const double r = (1 - f) * reach[std::size_t((k0 + sectors) % sectors)] + f * reach[std::size_t((k0 + 1) % sectors)];
+            const double r = (1 - f) * reach[wrap(k0)] + f * reach[wrap(k0 + 1)];
             const double scale = 1 / std::min(r, 1.0);
             pu(j, i) = cu + a * x * scale, pv(j, i) = cv + b * y * scale;
         }
