@@ -1,6 +1,6 @@
 #pragma once
-// Scratch files for the tests that read and write them (test_io, test_limits): a fresh
-// directory removed with everything in it, and raw bytes in and out.
+// Scratch files for the tests that read and write them (test_io, test_limits, test_sag,
+// test_forms): a fresh directory removed with everything in it, and raw bytes in and out.
 #include <doctest/doctest.h>
 
 #include <chrono>

@@ -16,6 +16,7 @@
 #include <freeform/design/exported.hpp>
 #endif
 
+#include "files.hpp"
 #include "support.hpp"
 
 using namespace freeform;
@@ -146,8 +147,9 @@ TEST_CASE("a grid sag written and read back is judged from the file") {
     shape(hm, [](double u, double v) { return 0.05 * u * u + 0.02 * u * v; });
     const BSplineSurface spline = fit_bspline(hm, 1.0, 4);
     const ImageD target = ImageD::Constant(40, 40, 1.0);
-    const io::FormCheck fc = io::write_and_check_form(ExportFormat::sag, "form.dat", s, hm, spline, &target, 1, 1);
-    CHECK(fc.bytes == std::filesystem::file_size("form.dat"));
+    const testing::TempDir dir;
+    const io::FormCheck fc = io::write_and_check_form(ExportFormat::sag, dir / "form.dat", s, hm, spline, &target, 1, 1);
+    CHECK(fc.bytes == std::filesystem::file_size(dir / "form.dat"));
     CHECK(fc.valid == "yes");
 #if defined(FREEFORM_WITH_EMBREE)
     REQUIRE(fc.cells);

@@ -21,6 +21,7 @@
 #include <freeform/surface/bspline.hpp>
 #include <freeform/surface/export.hpp>
 
+#include "files.hpp"
 #include "support.hpp"
 
 using namespace freeform;
@@ -186,7 +187,8 @@ TEST_CASE("a cubic is fitted exactly: the spline space holds it") {
 
 TEST_CASE("the grid sag table carries the designed vertices and their normals") {
     const Heightmap hm = smooth_surface(41, 31);
-    const std::filesystem::path f = "sag_test.dat";
+    const testing::TempDir dir;
+    const std::filesystem::path f = dir / "sag_test.dat";
     io::write_grid_sag(f, hm);
     const RawSag raw = parse_raw(f);
     REQUIRE(raw.nx == 41);
@@ -249,7 +251,8 @@ TEST_CASE("the grid sag table carries the designed vertices and their normals") 
 TEST_CASE("between the vertices the grid sag's bicubic surface follows the designed Phong patches") {
     const Heightmap hm = smooth_surface(41, 31);
     const double alpha = 0.5;  // the scenes' default phong_alpha
-    const std::filesystem::path f = "sag_between.dat";
+    const testing::TempDir dir;
+    const std::filesystem::path f = dir / "sag_between.dat";
     io::write_grid_sag(f, hm);
     const RawSag raw = parse_raw(f);
     REQUIRE(raw.rows.size() == std::size_t(41 * 31));
@@ -312,7 +315,8 @@ TEST_CASE("the STEP part's Hermite spline is the grid sag table's surface") {
     CHECK(vn < 1e-6);  // the normals are floats
     // Everywhere: the table's bicubic surface by this file's own evaluator (16 × 16 solve
     // per cell), against the spline's Cox–de Boor evaluation.
-    const std::filesystem::path f = "sag_hermite.dat";
+    const testing::TempDir dir;
+    const std::filesystem::path f = dir / "sag_hermite.dat";
     io::write_grid_sag(f, hm);
     const RawSag raw = parse_raw(f);
     std::mt19937 rng(11);
@@ -332,7 +336,8 @@ TEST_CASE("the STEP part's Hermite spline is the grid sag table's surface") {
 }
 
 TEST_CASE("grid sag reader: bad files are refused with the line") {
-    const std::filesystem::path f = "bad.dat";
+    const testing::TempDir dir;
+    const std::filesystem::path f = dir / "bad.dat";
     const auto write = [&](const std::string& text) { std::ofstream(f) << text; };
     write("3 3 1 1 0 0 0\n0 0 0 0 0\n");
     CHECK_THROWS_AS(io::read_grid_sag(f), InputError);  // too few points

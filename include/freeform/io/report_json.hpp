@@ -57,6 +57,10 @@ inline nlohmann::json start_report_json(const StartReport& s) {
     if (!s.fallback_reason.empty()) j["fallback_reason"] = s.fallback_reason;
     if (s.error >= 0) j["error"] = s.error, j["energy"] = s.energy;
     if (s.flat_error >= 0) j["flat_error"] = s.flat_error;
+    if (s.reweighted_error >= 0)
+        j["reweighted"] = {{"first_error", s.unreweighted_error},
+                           {"second_error", s.reweighted_error},
+                           {"kept", s.used == StartKind::transport && s.reweighted_error < s.unreweighted_error}};
     if (s.requested == StartKind::transport && s.transport.grid_x > 0) {
         const TransportReport& t = s.transport;
         j["transport"] = {{"grid", nlohmann::json::array({t.grid_x, t.grid_y})},

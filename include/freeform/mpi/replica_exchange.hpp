@@ -336,6 +336,7 @@ inline void pack_start(Packer& p, const SharedStart& s) {
     p.put(r.requested), p.put(r.used), p.put_string(r.fallback_reason);
     pack_transport_report(p, r.transport);
     p.put(r.error), p.put(r.energy), p.put(r.flat_error), p.put(r.seconds);
+    p.put(r.unreweighted_error), p.put(r.reweighted_error);
     p.put(r.levels_planned), p.put(r.levels_used);
     p.put_string(r.plan);
     p.put(s.transport), p.put(s.skip);
@@ -355,6 +356,7 @@ inline SharedStart unpack_start(Unpacker& u) {
     unpack_transport_report(u, r.transport);
     r.error = u.get<double>(), r.energy = u.get<double>(), r.flat_error = u.get<double>();
     r.seconds = u.get<double>();
+    r.unreweighted_error = u.get<double>(), r.reweighted_error = u.get<double>();
     r.levels_planned = u.get<int>(), r.levels_used = u.get<int>();
     r.plan = u.get_string();
     s.transport = u.get<bool>();

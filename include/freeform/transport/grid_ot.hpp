@@ -22,6 +22,7 @@
 // global state.
 #include <algorithm>
 #include <chrono>
+#include <memory>
 #include <cmath>
 #include <complex>
 #include <cstdint>
@@ -55,6 +56,9 @@ struct OtOptions {
     int residual_block = 4;    // cells per side of the blocks the residual compares
     double time_limit = 0;     // seconds; 0: none (a limit makes the result time dependent)
     int threads = 0;           // OpenMP threads for the line passes and Poisson solves (0: default)
+    // A target-side potential to start from (OtResult::phi of an earlier solve on the same
+    // grid, for a target that differs a little); unset or of another size: zero.
+    std::shared_ptr<const Eigen::ArrayXXd> warm_phi;
 };
 
 // The solution: T(x) = x − ∇ψ(x) moves the source mass μ onto ν.
@@ -476,7 +480,8 @@ inline OtResult solve_grid_ot(const OtGrid& grid, const Eigen::ArrayXXd& source,
 
     OtResult r;
     r.grid = grid;
-    Eigen::ArrayXXd phi = Eigen::ArrayXXd::Zero(grid.ny, grid.nx);  // target side
+    const bool warm = options.warm_phi && options.warm_phi->rows() == grid.ny && options.warm_phi->cols() == grid.nx;
+    Eigen::ArrayXXd phi = warm ? *options.warm_phi : Eigen::ArrayXXd::Zero(grid.ny, grid.nx);  // target side
     Eigen::ArrayXXd psi = ws.c_transform(phi, nu);                   // source side
     double sigma_phi = 1.0 / max_density, sigma_psi = 1.0 / max_density;
     double best = 2;
