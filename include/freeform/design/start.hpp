@@ -127,9 +127,11 @@ inline constexpr std::array<double, 2> start_grid_cells_per_pixel{3.0, 1.0};
 // adds about as much again as the fine grid's solve (the start's time roughly doubles),
 // and a 512² start gains more from it on the full grid than from the budget it leaves.
 inline constexpr int min_start_grid = 768, max_start_grid = 2048;
+inline constexpr double start_seconds_per_cell = 12e-6, start_seconds_per_ray = 1e-6, start_budget_share = 0.4;
 inline int start_grid_limit(const Scene& scene, double time_budget) {
     if (!(time_budget > 0)) return max_start_grid;
-    constexpr double seconds_per_cell = 12e-6, seconds_per_ray = 1e-6, budget_share = 0.4;
+    constexpr double seconds_per_cell = start_seconds_per_cell, seconds_per_ray = start_seconds_per_ray,
+                     budget_share = start_budget_share;
     const double rays = double(ray_budget(scene.light, scene.receiver));
     const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
     const double cells = (budget_share * time_budget - seconds_per_ray * rays) / seconds_per_cell;
@@ -258,6 +260,26 @@ inline ImageD reweighted_target(const ImageD& target, const CellMeans& lit) {
     return out;
 }
 
+// Whether a design of `scene` with `time_budget` seconds (0: none) affords the second
+// solve on a grid of at most `max_grid` a side: the first solves and the second, by
+// start_grid_limit's fixed rates (the second counted as a cold solve of the fine grid,
+// and its irradiance at a quarter of the tracer's rate per ray: cell means, no
+// objective), within start_budget_share of the budget. The letter E at 20 s (a 9 s
+// start, 19 s on a loaded machine, where annealing then never ran) and a 512² receiver
+// whose grid already takes the share go without; the E at 40 s and a 200² photograph at
+// 60 s get it. Fixed rates, so the decision depends on the scene and options alone.
+inline bool start_reweight_fits(const Scene& scene, double time_budget, int max_grid) {
+    if (!(time_budget > 0)) return true;
+    const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
+    const double fine = std::min(double(max_grid), start_grid_cells_per_pixel[0] * pixels_side);
+    const double coarse = std::min(fine, start_grid_cells_per_pixel[1] * pixels_side);
+    const double rays = double(ray_budget(scene.light, scene.receiver));
+    const double lit_rays = reweight_rays_per_cell * double(scene.receiver.cells());
+    const double first = start_seconds_per_cell * (fine * fine + coarse * coarse) + start_seconds_per_ray * rays;
+    const double second = start_seconds_per_cell * fine * fine + 0.25 * start_seconds_per_ray * lit_rays;
+    return first + second <= start_budget_share * time_budget;
+}
+
 // `start` solved again for its reweighted target (above); the better of the two under the
 // exact tracer. `report` gets the second solve's error.
 inline TransportStart reweighted_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
@@ -287,9 +309,12 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
 
 // The start a design begins from: the scene's own, or the best transport start
 // (best_transport_start) on grids of at most `max_grid` cells a side (start_grid_limit of
-// the design's time budget), judged against the flat surface.
+// the design's time budget), solved again for its reweighted target when `reweight`
+// (reweighted_transport_start; start_reweight_fits of the budget), judged against the
+// flat surface.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
-                                     std::uint64_t seed, int threads, int max_grid = min_start_grid) {
+                                     std::uint64_t seed, int threads, int max_grid = min_start_grid,
+                                     bool reweight = true) {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
     DesignStart start;
@@ -314,8 +339,9 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     try {
         best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
         start.report.unreweighted_error = best->eval.error;
-        best = reweighted_transport_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
-                                          start.report.reweighted_error);
+        if (reweight)
+            best = reweighted_transport_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
+                                              start.report.reweighted_error);
     } catch (const InputError& e) {
         if (scene.surface.initial_shape == InitialShape::transport) throw;
         fall_back(e.what());
@@ -341,13 +367,14 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     return start;
 }
 
-// The start of a design with `options`: its seed, and the transport grid its time budget
-// affords (start_grid_limit). The designer, a start-only design and a render of a scene's
+// The start of a design with `options`: its seed, and the transport grid and second solve
+// its time budget affords (start_grid_limit, start_reweight_fits). The designer, a start-only design and a render of a scene's
 // start all make it here, so that they make the same start.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      const DesignOptions& options, int threads) {
-    return make_design_start(scene, std::move(initial), target_image, options.seed, threads,
-                             start_grid_limit(scene, options.time_budget));
+    const int max_grid = start_grid_limit(scene, options.time_budget);
+    return make_design_start(scene, std::move(initial), target_image, options.seed, threads, max_grid,
+                             start_reweight_fits(scene, options.time_budget, max_grid));
 }
 
 }  // namespace freeform
