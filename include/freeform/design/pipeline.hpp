@@ -161,16 +161,6 @@ inline BSplineSurface step_spline(const Heightmap& top, double alpha, SplineForm
     return fit_bspline(top, alpha, spline_samples_per_cell);
 }
 
-// The designed surface's cell means: the height field traced with its Phong patches.
-inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
-                                     const CellMeanOptions& options, int threads) {
-    return converged_cell_means(scene, surface, &target, options,
-                                [&](const Scene&, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
-                                    HeightfieldTracer(surface, batch.rays, batch.params)
-                                        .trace_all(exec::omp_t{threads}, h, t);
-                                });
-}
-
 // Cell means for error_physical: rays of their own jitter, not the design's, so the figure
 // is not the one the design was fitted to.
 inline CellMeanOptions physical_cell_mean_options(std::uint64_t seed) {

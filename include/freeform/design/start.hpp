@@ -14,13 +14,13 @@
 #include <vector>
 
 #include "../core/exec.hpp"
-#include "cell_means.hpp"
 #include "../objective/trace_setup.hpp"
 #include "../scene/rays.hpp"
 #include "../scene/scene.hpp"
 #include "../trace/heightfield.hpp"
 #include "../trace/setup.hpp"
 #include "../transport/start.hpp"
+#include "cell_means.hpp"
 #include "options.hpp"
 
 namespace freeform {
@@ -130,11 +130,9 @@ inline constexpr int min_start_grid = 768, max_start_grid = 2048;
 inline constexpr double start_seconds_per_cell = 12e-6, start_seconds_per_ray = 1e-6, start_budget_share = 0.4;
 inline int start_grid_limit(const Scene& scene, double time_budget) {
     if (!(time_budget > 0)) return max_start_grid;
-    constexpr double seconds_per_cell = start_seconds_per_cell, seconds_per_ray = start_seconds_per_ray,
-                     budget_share = start_budget_share;
     const double rays = double(ray_budget(scene.light, scene.receiver));
     const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
-    const double cells = (budget_share * time_budget - seconds_per_ray * rays) / seconds_per_cell;
+    const double cells = (start_budget_share * time_budget - start_seconds_per_ray * rays) / start_seconds_per_cell;
     // side² + min(side, pixels_side)² ≤ cells: the fine grid and the grid of the pixels.
     double side = std::sqrt(std::max(0.0, cells - pixels_side * pixels_side));
     if (side < pixels_side) side = std::sqrt(std::max(0.0, cells / 2));
@@ -221,7 +219,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
     return std::move(*best);
 }
 
-// The start's second solve (docs/architecture.md §4b, "The reweighted target"). The
+// The start's second solve (docs/architecture.md §4b, step 4). The
 // fitted surface does not put its light exactly where the map sends it: the least-squares
 // fit keeps only the part of the map a surface can make, and a near receiver, a point
 // light or a large deflection bends the rest (a round mirror 16° off a point light,
@@ -280,8 +278,18 @@ inline bool start_reweight_fits(const Scene& scene, double time_budget, int max_
     return first + second <= start_budget_share * time_budget;
 }
 
+// The designed surface's cell means: the height field traced with its Phong patches.
+inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
+                                     const CellMeanOptions& options, int threads) {
+    return converged_cell_means(scene, surface, &target, options,
+                                [&](const Scene&, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
+                                    HeightfieldTracer(surface, batch.rays, batch.params)
+                                        .trace_all(exec::omp_t{threads}, h, t);
+                                });
+}
+
 // `start` solved again for its reweighted target (above); the better of the two under the
-// exact tracer. `report` gets the second solve's error.
+// exact tracer. `reweighted_error` gets the second solve's error.
 inline TransportStart reweighted_transport_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                                  TransportStart start, std::uint64_t seed, int threads, int max_grid,
                                                  double& reweighted_error) {
@@ -290,11 +298,7 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
     lit_options.max_rays_per_cell = reweight_rays_per_cell;
     lit_options.tolerance = 0;  // all four batches
     lit_options.seed = hash_combine(seed, 0x7265776569676874ULL);
-    const CellMeans lit = converged_cell_means(scene, start.surface, &target_image, lit_options,
-                                               [&](const Scene&, const TraceSetup& batch, Histogram& h, TraceTotals& t) {
-                                                   HeightfieldTracer(start.surface, batch.rays, batch.params)
-                                                       .trace_all(exec::omp_t{threads}, h, t);
-                                               });
+    const CellMeans lit = designed_cell_means(scene, start.surface, target_image, lit_options, threads);
     TransportStart second =
         transport_start_on(scene, initial, reweighted_target(target_image, lit), target_image, seed, threads, max_grid,
                            start.map.report.cells_per_pixel, start.map.strips,
@@ -368,8 +372,9 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
 }
 
 // The start of a design with `options`: its seed, and the transport grid and second solve
-// its time budget affords (start_grid_limit, start_reweight_fits). The designer, a start-only design and a render of a scene's
-// start all make it here, so that they make the same start.
+// its time budget affords (start_grid_limit, start_reweight_fits). The designer, a
+// start-only design and a render of a scene's start all make it here, so that they make
+// the same start.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      const DesignOptions& options, int threads) {
     const int max_grid = start_grid_limit(scene, options.time_budget);

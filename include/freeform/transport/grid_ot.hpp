@@ -22,11 +22,11 @@
 // global state.
 #include <algorithm>
 #include <chrono>
-#include <memory>
 #include <cmath>
 #include <complex>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
