@@ -10,6 +10,23 @@
 
 namespace freeform::testing {
 
+// True in the AddressSanitizer and ThreadSanitizer builds (CMakePresets.json's sanitize
+// and tsan presets), which run the tests about eight times slower. A case may leave out
+// there the repetitions that measure only accuracy along code its other repetitions
+// already run; the release run checks every one. GCC defines __SANITIZE_ADDRESS__,
+// clang answers __has_feature.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+inline constexpr bool sanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+inline constexpr bool sanitized = true;
+#else
+inline constexpr bool sanitized = false;
+#endif
+#else
+inline constexpr bool sanitized = false;
+#endif
+
 // The reference scene of docs/architecture.md §2: a 0.1 m mirror at the origin facing +z, light
 // straight down, a 0.2 m receiver at z = 0.5 facing the mirror.
 inline Scene basic_scene(int receiver_px = 100, double rays_per_cell = 16) {

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -526,17 +527,20 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
     const auto job = [&] { return DesignJob{c.scene, c.options}; };
     DesignSetup quick;
     quick.export_checks = false;
-    const CompletedDesign plain = design(job(), c.target, quick);
-    // The finish without the export: no part, no error_physical; the fitted traces run.
-    CHECK(plain.exported.fabrication.mesh.triangles.empty());
-    CHECK_FALSE(plain.error_physical());
-    CHECK(plain.fitted.error > 0);
+    // The design with the options' own penalties, made only in the subcases that compare
+    // with it (doctest runs the body again for every subcase).
+    const auto plain_design = [&] { return design(job(), c.target, quick); };
     const auto annealed = [&](std::optional<Heightmap> initial, const Penalties& penalties) {
         PlannedDesign plan = plan_design(job(), std::move(initial));
         return design(plan.scene, std::move(plan.initial), c.target, plan.options, never_stop(), penalties);
     };
 
     SUBCASE("no penalties given: the options' own") {
+        const CompletedDesign plain = plain_design();
+        // The finish without the export: no part, no error_physical; the fitted traces run.
+        CHECK(plain.exported.fabrication.mesh.triangles.empty());
+        CHECK_FALSE(plain.error_physical());
+        CHECK(plain.fitted.error > 0);
         DesignSetup given = quick;
         given.penalties = default_penalties(c.options.penalties, c.scene.surface.tool_radius);
         check_identical(plain.result, design(job(), c.target, given).result);
@@ -550,7 +554,7 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
         const CompletedDesign d = design(job(), c.target, setup);
         check_identical(d.result, annealed({}, penalties));
         CHECK(d.result.value.penalty > 0);
-        CHECK_FALSE(same_bits(d.result.surface.heights(), plain.result.surface.heights()));
+        CHECK_FALSE(same_bits(d.result.surface.heights(), plain_design().result.surface.heights()));
     }
     SUBCASE("a start surface of the caller's") {
         c.scene.surface.initial_shape = InitialShape::flat;
@@ -638,120 +642,137 @@ private:
 // optimise.device "cuda" through DesignSetup::cuda: the designer hands every stage's
 // speculative windows to the offered backend, and the design is the CPU's bit for bit
 // (the property a GPU design must keep, tests/cuda/gpu_vs_cpu.cu, here in every build).
-TEST_CASE("a design whose windows run on an offered device is the CPU design bit for bit") {
+// The fixture holds the CPU design of a small case with a transport start (as `freeform
+// design` makes it) and an offer of the host kernels that counts its backends and windows.
+// The four cases below share it; each designs the CPU run once (doctest runs a case's body
+// again for every subcase, and under the sanitizers these designs are most of this file).
+struct OfferedDevice {
     SmallCase c = small_case();
-    c.scene.target = TargetSpec{};  // a transport start, as `freeform design` makes
     DesignSetup quick;
-    quick.export_checks = false;
-    const CompletedDesign cpu = design(DesignJob{c.scene, c.options}, c.target, quick);
-    CHECK(cpu.result.device == "cpu");
-
     std::int64_t backends = 0, windows = 0;
     DeviceOffer offer;
-    offer.name = "host kernels";
-    offer.window = 6;
-    offer.make = [&](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
-        ++backends;
-        return std::make_unique<CountingWindowBackend>(windows);
-    };
+    std::optional<CompletedDesign> cpu;
+
+    explicit OfferedDevice(bool design_on_cpu = true) {
+        c.scene.target = TargetSpec{};
+        quick.export_checks = false;
+        offer.name = "host kernels";
+        offer.window = 6;
+        offer.make = [this](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
+            ++backends;
+            return std::make_unique<CountingWindowBackend>(windows);
+        };
+        if (!design_on_cpu) return;
+        cpu = design(DesignJob{c.scene, c.options}, c.target, quick);
+        CHECK(cpu->result.device == "cpu");
+    }
+    OfferedDevice(const OfferedDevice&) = delete;  // `offer` refers to this object
+    OfferedDevice& operator=(const OfferedDevice&) = delete;
+
     // The design with `o` on the device `given` offers: the CPU's bit for bit, said to be on the device.
-    const auto on_device = [&](const DesignOptions& o, const DeviceOffer& given) {
+    CompletedDesign on_device(const DesignOptions& o, const DeviceOffer& given) {
         DesignSetup setup = quick;
         setup.cuda = given;
         backends = windows = 0;
         CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
-        check_identical(cpu.result, d.result);
+        check_identical(cpu->result, d.result);
         CHECK(d.result.device == "cuda (host kernels)");
         return d;
-    };
+    }
+};
+
+TEST_CASE("a design whose windows run on an offered device is the CPU design bit for bit") {
+    OfferedDevice f;
     for (const Device asked : {Device::cuda, Device::automatic})
         for (const int threads : {1, 2}) {
             CAPTURE(to_string(asked));
             CAPTURE(threads);
-            DesignOptions o = c.options;
+            DesignOptions o = f.c.options;
             o.device = asked;
             o.threads = threads;
-            const CompletedDesign d = on_device(o, offer);
-            CHECK(backends == std::int64_t(d.result.stages.size()));  // one per stage
-            CHECK(windows > 0);
+            const CompletedDesign d = f.on_device(o, f.offer);
+            CHECK(f.backends == std::int64_t(d.result.stages.size()));  // one per stage
+            CHECK(f.windows > 0);
         }
+}
 
-    SUBCASE("a device asked for but not offered, or unusable, is refused naming the key; auto takes the CPU") {
-        DesignOptions o = c.options;
-        o.device = Device::cuda;
-        DesignSetup setup = quick;
-        const auto refusal = [&] {
-            try {
-                design(DesignJob{c.scene, o}, c.target, setup);
-            } catch (const InputError& e) {
-                return std::string(e.what());
-            }
-            return std::string("no error");
-        };
-        CHECK(refusal().starts_with("optimise.device: \"cuda\" asked for, but the program running this design offers "
-                                    "no CUDA device"));
-        DeviceOffer none;
-        none.unavailable = "no CUDA device on this machine";
-        setup.cuda = none;
-        CHECK(refusal() == "optimise.device: \"cuda\" asked for, but no CUDA device on this machine");
-        setup.cuda = offer;
-        o.evaluation = EvaluationMode::full;
-        CHECK(refusal().find("optimise.evaluation \"full\"") != std::string::npos);
-        o.evaluation = EvaluationMode::incremental;
-        o.device = Device::automatic;
-        setup.cuda = none;
-        backends = 0;
-        const CompletedDesign d = design(DesignJob{c.scene, o}, c.target, setup);
-        CHECK(d.result.device == "cpu");
-        CHECK(backends == 0);
-        check_identical(cpu.result, d.result);
-    }
-
-    SUBCASE("a timed design on a device runs until its time is up, its windows on the device") {
-        // The flat start of a scene without a target block (no transport start: under the
-        // sanitizers that alone would take the budget), as the time-budget test below.
-        const SmallCase flat = small_case();
-        DesignOptions o = flat.options;
-        o.time_budget = 1.5;
-        o.levels.clear();  // planned for the time, as a user's design is
-        SingleReplica single;
-        backends = windows = 0;
-        const DesignResult r = design(flat.scene, surface_for(flat.scene, SmallCase::mesh), flat.target, o,
-                                      never_stop(), default_penalties(o.penalties), single, nullptr, &offer);
-        REQUIRE(!r.stages.empty());
-        CHECK(r.stages.back().stop_reason == StopReason::time_budget);
-        CHECK(r.seconds >= 0.95 * o.time_budget);
-        CHECK(windows > 0);
-        CHECK(backends == std::int64_t(r.stages.size()));
-        CHECK(r.device == "cuda (host kernels)");
-        CHECK(r.device_failure.empty());
-    }
-
-    SUBCASE("a device that fails mid-design (a window, a commit, its backend) leaves the design to the CPU, the same") {
-        DesignOptions o = c.options;
-        o.device = Device::cuda;
-        struct Failure {
-            const char* name;
-            std::int64_t fail_at;
-            bool fail_commit, fail_make;
-            const char* message;
-        };
-        for (const Failure& f : {Failure{"a window throws", 40, false, false, "device lost"},
-                                 Failure{"a commit throws", 40, true, false, "out of device memory"},
-                                 Failure{"the second stage's backend cannot be made", 0, false, true, "no memory"}}) {
-            CAPTURE(std::string(f.name));
-            DeviceOffer failing = offer;
-            std::int64_t failed_at = -1;
-            failing.make = [&](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
-                if (f.fail_make && ++backends == 2) throw std::runtime_error(f.message);
-                return std::make_unique<CountingWindowBackend>(windows, f.fail_at, f.fail_commit, &failed_at);
-            };
-            const CompletedDesign d = on_device(o, failing);
-            CHECK(d.result.device_failure.find(f.message) != std::string::npos);
-            CHECK(d.result.device_failure.starts_with(f.fail_make ? "level 2 stage 1: " : "level "));
-            // No window after the failure (a commit fails at the first accepted move after fail_at).
-            if (!f.fail_make) CHECK(windows == (f.fail_commit ? failed_at : f.fail_at));
+TEST_CASE("a device asked for but not offered, or unusable, is refused naming the key; auto takes the CPU") {
+    OfferedDevice f;
+    DesignOptions o = f.c.options;
+    o.device = Device::cuda;
+    DesignSetup setup = f.quick;
+    const auto refusal = [&] {
+        try {
+            design(DesignJob{f.c.scene, o}, f.c.target, setup);
+        } catch (const InputError& e) {
+            return std::string(e.what());
         }
+        return std::string("no error");
+    };
+    CHECK(refusal().starts_with("optimise.device: \"cuda\" asked for, but the program running this design offers "
+                                "no CUDA device"));
+    DeviceOffer none;
+    none.unavailable = "no CUDA device on this machine";
+    setup.cuda = none;
+    CHECK(refusal() == "optimise.device: \"cuda\" asked for, but no CUDA device on this machine");
+    setup.cuda = f.offer;
+    o.evaluation = EvaluationMode::full;
+    CHECK(refusal().find("optimise.evaluation \"full\"") != std::string::npos);
+    o.evaluation = EvaluationMode::incremental;
+    o.device = Device::automatic;
+    setup.cuda = none;
+    f.backends = 0;
+    const CompletedDesign d = design(DesignJob{f.c.scene, o}, f.c.target, setup);
+    CHECK(d.result.device == "cpu");
+    CHECK(f.backends == 0);
+    check_identical(f.cpu->result, d.result);
+}
+
+TEST_CASE("a timed design on a device runs until its time is up, its windows on the device") {
+    // The flat start of a scene without a target block (no transport start: under the
+    // sanitizers that alone would take the budget), as the time-budget test below.
+    OfferedDevice f(false);
+    const SmallCase flat = small_case();
+    DesignOptions o = flat.options;
+    o.time_budget = 1.5;
+    o.levels.clear();  // planned for the time, as a user's design is
+    SingleReplica single;
+    const DesignResult r = design(flat.scene, surface_for(flat.scene, SmallCase::mesh), flat.target, o, never_stop(),
+                                  default_penalties(o.penalties), single, nullptr, &f.offer);
+    REQUIRE(!r.stages.empty());
+    CHECK(r.stages.back().stop_reason == StopReason::time_budget);
+    CHECK(r.seconds >= 0.95 * o.time_budget);
+    CHECK(f.windows > 0);
+    CHECK(f.backends == std::int64_t(r.stages.size()));
+    CHECK(r.device == "cuda (host kernels)");
+    CHECK(r.device_failure.empty());
+}
+
+TEST_CASE("a device that fails mid-design (a window, a commit, its backend) leaves the design to the CPU, the same") {
+    OfferedDevice f;
+    DesignOptions o = f.c.options;
+    o.device = Device::cuda;
+    struct Failure {
+        const char* name;
+        std::int64_t fail_at;
+        bool fail_commit, fail_make;
+        const char* message;
+    };
+    for (const Failure& fail : {Failure{"a window throws", 40, false, false, "device lost"},
+                                Failure{"a commit throws", 40, true, false, "out of device memory"},
+                                Failure{"the second stage's backend cannot be made", 0, false, true, "no memory"}}) {
+        CAPTURE(std::string(fail.name));
+        DeviceOffer failing = f.offer;
+        std::int64_t failed_at = -1;
+        failing.make = [&](const Heightmap&, const RaySet&, const PathParams&) -> std::unique_ptr<WindowBackend> {
+            if (fail.fail_make && ++f.backends == 2) throw std::runtime_error(fail.message);
+            return std::make_unique<CountingWindowBackend>(f.windows, fail.fail_at, fail.fail_commit, &failed_at);
+        };
+        const CompletedDesign d = f.on_device(o, failing);
+        CHECK(d.result.device_failure.find(fail.message) != std::string::npos);
+        CHECK(d.result.device_failure.starts_with(fail.fail_make ? "level 2 stage 1: " : "level "));
+        // No window after the failure (a commit fails at the first accepted move after fail_at).
+        if (!fail.fail_make) CHECK(f.windows == (fail.fail_commit ? failed_at : fail.fail_at));
     }
 }
 

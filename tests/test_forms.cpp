@@ -37,7 +37,8 @@ FormDistances distances(Scene s, int n) {
     s.target = TargetSpec{};
     s.receiver.deposit = Deposit::bilinear;
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
-    const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1);
+    // The first solve's start (no reweighted second solve): any transport surface serves here.
+    const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1, min_start_grid, false);
     REQUIRE(st.report.used == StartKind::transport);
     const Heightmap& hm = st.surface;
     const TraceSetup setup = make_trace_setup(s, hm, nullptr, 1);

@@ -535,7 +535,10 @@ void check_problem(Problem& problem, Fresh&& fresh_value) {
 
 }  // namespace
 
-TEST_CASE("maintained histogram and objective equal a full recompute after 10,000 proposals") {
+// The cases in the doctest suite "serial" run on one thread: the ThreadSanitizer run leaves
+// them out (CMakePresets.json's tsan test preset; tests/main.cpp).
+TEST_CASE("maintained histogram and objective equal a full recompute after 10,000 proposals" *
+          doctest::test_suite("serial")) {
     for (const Case& c : cases()) {
         CAPTURE(c.name);
         Setup s = make_setup(c);
@@ -595,7 +598,8 @@ AnnealOptions fixed_windows(std::int64_t iterations, int speculative, int thread
 
 }  // namespace
 
-TEST_CASE("a problem built on the trace of the one before it follows a rebuilt one move for move") {
+TEST_CASE("a problem built on the trace of the one before it follows a rebuilt one move for move" *
+          doctest::test_suite("serial")) {
     // The designer hands a level's trace from stage to stage instead of tracing every ray
     // again (design/designer.hpp, make_problem): the result must not change.
     for (const Case& c : cases()) {
@@ -689,7 +693,8 @@ TEST_CASE("an Embree problem annealed with speculative windows on 2 threads foll
     CHECK(speculative.first.proposals_evaluated > speculative.first.iterations);
 }
 
-TEST_CASE("the Embree backend keeps the same invariant, refitting only touched tiles") {
+TEST_CASE("the Embree backend keeps the same invariant, refitting only touched tiles" *
+          doctest::test_suite("serial")) {
     for (const Case& c : cases()) {
         CAPTURE(c.name);
         Setup s = make_setup(c);
@@ -713,7 +718,9 @@ TEST_CASE("the Embree backend keeps the same invariant, refitting only touched t
 }
 #endif
 
-TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's reach; the whole mesh changes nothing") {
+TEST_CASE(
+    "set_centre_rows: moves change only the strip's rows and a kernel's reach; the whole mesh changes nothing" *
+    doctest::test_suite("serial")) {
     for (const bool guided : {false, true}) {
         CAPTURE(guided);
         const auto all = cases();
@@ -749,7 +756,8 @@ TEST_CASE("set_centre_rows: moves change only the strip's rows and a kernel's re
     }
 }
 
-TEST_CASE("heights put back inside a small box are applied like a move: the problem follows a rebuilt one") {
+TEST_CASE("heights put back inside a small box are applied like a move: the problem follows a rebuilt one" *
+          doctest::test_suite("serial")) {
     // A stage that ends by putting its best state back (design/problem.hpp,
     // replace_heights) retraces only the rays the changed box can affect when the box is
     // small, and every ray otherwise; both must leave the state a full rebuild gives.

@@ -552,11 +552,14 @@ TEST_CASE("transport start: a lens that spreads its light wider than itself thro
 
     // Spreading further: three times its size (more sag and glass, as the script of
     // benchmarks/results/lens_walls gives it). Its outermost column was 16-17 % short
-    // until the border goals were continued straight (extrapolate_border_aims).
-    Scene wider = lens_scene(0.3);
-    wider.surface.material = Lens{1.49, 0.02};
-    wider.surface.h_min = -0.016, wider.surface.h_max = 0.016;
-    check(wider, "lens, receiver three times its size", 0);
+    // until the border goals were continued straight (extrapolate_border_aims). Accuracy
+    // only, along the code of the lens above: not repeated under the sanitizers.
+    if (!testing::sanitized) {
+        Scene wider = lens_scene(0.3);
+        wider.surface.material = Lens{1.49, 0.02};
+        wider.surface.h_min = -0.016, wider.surface.h_max = 0.016;
+        check(wider, "lens, receiver three times its size", 0);
+    }
 
     Scene point = lens_scene(0.2);
     point.light.shape = PointLight{{0, 0, 0.3}, {0, 0, 0}, {}};
@@ -580,7 +583,7 @@ TEST_CASE("transport start: a lens that spreads its light wider than itself thro
     // range; surface/heightmap.hpp vertex_normal).
     const Scene small = lens_scene(0.05);
     CHECK(lens_rim(small) == 0);
-    check(small, "lens, receiver half its size", 0);
+    if (!testing::sanitized) check(small, "lens, receiver half its size", 0);  // accuracy only, as above
 
     // A body no wider than the face (rim 0): the plain map sends light into the walls and
     // the start aims wall strips at them (WallStrips). The two outermost rows and columns
@@ -597,8 +600,10 @@ TEST_CASE("transport start: a lens that spreads its light wider than itself thro
     mirror.surface.h_min = -0.005, mirror.surface.h_max = 0.005;
     mirror.target = TargetSpec{};
     CHECK(lens_rim(mirror) == 0);
-    const TransportReport m = check(mirror, "mirror", 0);
-    CHECK(m.strip_margin == 0);
+    if (!testing::sanitized) {  // a mirror's start runs in the other cases under the sanitizers
+        const TransportReport m = check(mirror, "mirror", 0);
+        CHECK(m.strip_margin == 0);
+    }
 }
 
 TEST_CASE("transport start: a picture that fills the receiver lights its dark edges (the border goals)") {
