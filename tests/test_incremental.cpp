@@ -505,13 +505,14 @@ ProposalSettings proposals() {
     return p;
 }
 
-// 10,000 proposals, accepted at random (40 %), then compared with a full recompute.
+// `moves` proposals (10,000 unless told), accepted at random (40 %), then compared with
+// a full recompute.
 template <class Problem, class Fresh>
-void check_problem(Problem& problem, Fresh&& fresh_value) {
+void check_problem(Problem& problem, Fresh&& fresh_value, std::uint64_t moves = 10000) {
     typename Problem::Move m;
     CounterRng pick(1234, 0);
-    int accepted = 0;
-    for (std::uint64_t it = 0; it < 10000; ++it) {
+    std::uint64_t accepted = 0;
+    for (std::uint64_t it = 0; it < moves; ++it) {
         CounterRng rng(77, it);
         problem.propose(rng, 1.0, m);
         const double before = problem.energy();
@@ -526,7 +527,7 @@ void check_problem(Problem& problem, Fresh&& fresh_value) {
         }
         if ((it + 1) % 64 == 0) problem.sync();
     }
-    CHECK(accepted > 3500);
+    CHECK(accepted > moves * 35 / 100);
     const ObjectiveValue recomputed = fresh_value();
     CHECK(std::abs(problem.value().total - recomputed.total) <= 1e-12 * std::abs(recomputed.total));
     CHECK(problem.value().total == recomputed.total);  // exact: every term is an integer sum
@@ -701,12 +702,17 @@ TEST_CASE("the Embree backend keeps the same invariant, refitting only touched t
         EmbreeTracer tracer(s.hm, s.rays, s.pp, {}, 8);
         EmbreeSurfaceProblem problem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
                                        make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&tracer, &s.hm});
-        check_problem(problem, [&] {
-            EmbreeTracer t2(s.hm, s.rays, s.pp, {}, 8);
-            EmbreeSurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
-                                         make_bandit(BanditKind::history, 7), 1e-4, 1.0, EmbreeBackend{&t2, &s.hm});
-            return fresh.value();
-        });
+        // A quarter of the proposals under the sanitizers (in release this case is half the file's time).
+        check_problem(
+            problem,
+            [&] {
+                EmbreeTracer t2(s.hm, s.rays, s.pp, {}, 8);
+                EmbreeSurfaceProblem fresh(s.hm, s.rays, s.pp, s.target, {}, s.penalties, proposals(),
+                                             make_bandit(BanditKind::history, 7), 1e-4, 1.0,
+                                             EmbreeBackend{&t2, &s.hm});
+                return fresh.value();
+            },
+            testing::sanitized ? 2500 : 10000);
         // Against a fresh Embree full trace of the final surface.
         EmbreeTracer fresh(s.hm, s.rays, s.pp, {}, 8);
         Histogram h(s.scene.receiver.width, s.scene.receiver.height);
