@@ -17,6 +17,7 @@
 #endif
 
 #include "files.hpp"
+#include "start_support.hpp"
 #include "support.hpp"
 
 using namespace freeform;
@@ -37,8 +38,8 @@ FormDistances distances(Scene s, int n) {
     s.target = TargetSpec{};
     s.receiver.deposit = Deposit::bilinear;
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
-    // The first solve's start (no reweighted second solve): any transport surface serves here.
-    const DesignStart st = make_design_start(s, surface_for(s, n), target, 3, 1, min_start_grid, false);
+    // Any transport surface serves here: the first solve's (testing::first_solve_start).
+    const DesignStart st = first_solve_start(s, surface_for(s, n), target, 3, 1);
     REQUIRE(st.report.used == StartKind::transport);
     const Heightmap& hm = st.surface;
     const TraceSetup setup = make_trace_setup(s, hm, nullptr, 1);

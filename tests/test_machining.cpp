@@ -18,6 +18,7 @@
 #include <freeform/design/start.hpp>
 #include <freeform/surface/export.hpp>
 
+#include "start_support.hpp"
 #include "support.hpp"
 
 using namespace freeform;
@@ -136,9 +137,8 @@ TEST_CASE("machining report on a design's start surface agrees with quadratic fi
     Scene scene = testing::basic_scene(100, 16);
     scene.target = TargetSpec{};
     const ImageD target = testing::two_blocks(100, 100);
-    // The first solve's start (no reweighted second solve): any transport surface serves here.
-    DesignStart start =
-        make_design_start(scene, testing::surface_for(scene, 101), target, 1, 2, min_start_grid, false);
+    // Any transport surface serves here: the first solve's (testing::first_solve_start).
+    DesignStart start = testing::first_solve_start(scene, testing::surface_for(scene, 101), target, 1, 2);
     const MachiningReport r = machining_report(scene, start.surface, {});
     REQUIRE(start.report.used == StartKind::transport);
     REQUIRE(r.min_concave_radius.has_value());

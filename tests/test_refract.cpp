@@ -12,6 +12,7 @@
 #include <freeform/surface/export.hpp>
 #include <freeform/surface/triangle_mesh.hpp>
 
+#include "start_support.hpp"
 #include "support.hpp"
 
 #if defined(FREEFORM_WITH_EMBREE)
@@ -464,8 +465,8 @@ TEST_CASE("the exported lens solid, traced as a refractive mesh, gives the desig
     s.receiver.deposit = Deposit::bilinear;
     s.target = TargetSpec{};
     const ImageD target = ring_and_bar(s.receiver.width, s.receiver.height);
-    // The first solve's start (no reweighted second solve): any transport surface serves here.
-    const DesignStart st = make_design_start(s, surface_for(s, 51), target, 3, 1, min_start_grid, false);
+    // Any transport surface serves here: the first solve's (testing::first_solve_start).
+    const DesignStart st = first_solve_start(s, surface_for(s, 51), target, 3, 1);
     REQUIRE(st.report.used == StartKind::transport);
     const RaySet rays = generate_rays(s.light, st.surface, s.receiver, 1);
     const Traced design = trace_scene(s, st.surface, rays, exec::omp);

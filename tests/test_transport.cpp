@@ -17,9 +17,11 @@
 #include <freeform/transport/morph.hpp>
 #include <freeform/transport/start.hpp>
 
+#include "start_support.hpp"
 #include "support.hpp"
 
 using namespace freeform;
+using testing::first_solve_start;
 using testing::two_blocks;
 
 namespace {
@@ -38,15 +40,6 @@ double max_map_error_cells(const OtResult& r, Expected expected, Where where) {
             worst = std::max({worst, std::abs(r.map_x(j, i) - e.x) / r.grid.hx, std::abs(r.map_y(j, i) - e.y) / r.grid.hy});
         }
     return worst;
-}
-
-// The start of the first solve alone (make_design_start without the reweighted second
-// solve). The cases that use it test the first solve's geometry (aims, edges, walls,
-// stretches); the second solve, kept only when the exact tracer finds it better, has
-// cases of its own, and leaving it out here halves this file's time under the
-// sanitizers.
-DesignStart first_solve_start(const Scene& s, Heightmap initial, const ImageD& target, std::uint64_t seed, int threads) {
-    return make_design_start(s, std::move(initial), target, seed, threads, min_start_grid, false);
 }
 
 // The standard normal CDF.

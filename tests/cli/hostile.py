@@ -259,24 +259,23 @@ else:
 # these kills test how results are published (renames, not memory), they are timed to an
 # unsanitized run's phases, and they are half of this test's design runs (the test took
 # 232 s under ASan in CI, 47 s in release); the release run makes them.
-kill_moments = 0 if SANITIZED else 8
 if SANITIZED:
     print("skipped SIGKILL at moments of a run: under the sanitizers (the release run makes them)")
 else:
     rc, _, _, full_seconds, _ = run(["design", tiny, "--out", os.path.join(WORK, "timing"), "--quiet"])
-for k in range(kill_moments):
-    delay = full_seconds * (0.6 + 0.06 * k)
-    with open(os.devnull, "wb") as null:
-        p = subprocess.Popen([FREEFORM, "design", tiny, "--out", design_out, "--quiet", "--seed", str(20 + k)],
-                             stdout=null, stderr=null, cwd=WORK)
-        time.sleep(delay)
-        p.send_signal(signal.SIGKILL)
-        p.wait()
-    files = snapshot(design_out)
-    if "metrics.json" in files and complete(design_out, DESIGN_FILES):
-        fail(f"SIGKILL after {delay:.2f} s: metrics.json beside {complete(design_out, DESIGN_FILES)}")
-    seeds = {json.loads(files["metrics.json"]).get("seed")} if "metrics.json" in files else set()
-    print(f"ok   SIGKILL after {delay:.2f} s: {'complete results of seed ' + str(seeds) if seeds else 'no metrics.json'}")
+    for k in range(8):
+        delay = full_seconds * (0.6 + 0.06 * k)
+        with open(os.devnull, "wb") as null:
+            p = subprocess.Popen([FREEFORM, "design", tiny, "--out", design_out, "--quiet", "--seed", str(20 + k)],
+                                 stdout=null, stderr=null, cwd=WORK)
+            time.sleep(delay)
+            p.send_signal(signal.SIGKILL)
+            p.wait()
+        files = snapshot(design_out)
+        if "metrics.json" in files and complete(design_out, DESIGN_FILES):
+            fail(f"SIGKILL after {delay:.2f} s: metrics.json beside {complete(design_out, DESIGN_FILES)}")
+        seeds = {json.loads(files["metrics.json"]).get("seed")} if "metrics.json" in files else set()
+        print(f"ok   SIGKILL after {delay:.2f} s: {'complete results of seed ' + str(seeds) if seeds else 'no metrics.json'}")
 
 print(f"{len(failures)} failure(s)")
 sys.exit(1 if failures else 0)
