@@ -43,6 +43,12 @@ struct OtGrid {
     int nx = 0, ny = 0;
     double x0 = 0, y0 = 0;  // corner of cell (0, 0)
     double hx = 1, hy = 1;  // cell size
+    // The source side's coordinates are the flat landings times this factor, about the
+    // receiver's centre (transport_grid: a footprint wider than the grid may reach is
+    // shrunk onto it, not cut). A similarity of the source leaves a quadratic-cost map
+    // as it is: if T = ∇f is optimal from μ, then x ↦ T(x/s) = ∇(s·f(x/s)) is the
+    // gradient of a convex function pushing the scaled μ onto the same ν (Brenier).
+    double source_scale = 1;
 
     double x_of(int i) const { return x0 + (i + 0.5) * hx; }
     double y_of(int j) const { return y0 + (j + 0.5) * hy; }
