@@ -317,6 +317,30 @@ TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every lev
     }
 }
 
+TEST_CASE("plan_levels: each side of the surface gets at least the pixels of the receiver axis it lies along") {
+    // A 20 × 4 cm strip under a 200² receiver: the aspect alone gave 201 × 41, five pixels
+    // a cell across the strip (its start drew arcs in a checkerboard's dark squares and a
+    // 30 s design ended at 0.0498 against 0.0231 on 201 × 201).
+    Scene s = basic_scene(200, 16);
+    s.surface.size = {0.2, 0.04};
+    CHECK(plan_levels(s, {}).back().mesh_x == 201);
+    CHECK(plan_levels(s, {}).back().mesh_y == 201);
+    // A 300 × 100 receiver: the strip's short side lies along the receiver's 100 pixels.
+    s.receiver.width = 300, s.receiver.height = 100, s.receiver.size = {0.3, 0.1};
+    CHECK(plan_levels(s, {}).back().mesh_x == 301);
+    CHECK(plan_levels(s, {}).back().mesh_y == 101);
+    // The same receiver turned a quarter (its up along the strip): the short side now
+    // lies along the receiver's 300 pixels, the long one along its 100.
+    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {1, 0, 0}, "receiver");
+    CHECK(plan_levels(s, {}).back().mesh_x == 301);
+    CHECK(plan_levels(s, {}).back().mesh_y == 301);
+    // Where the aspect gives more than the floor it stays: 120 × 60 mm onto 300 × 100.
+    s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
+    s.surface.size = {0.12, 0.06};
+    CHECK(plan_levels(s, {}).back().mesh_x == 301);
+    CHECK(plan_levels(s, {}).back().mesh_y == 151);
+}
+
 // ------------------------------------------------------------------------- reproducibility
 
 TEST_CASE("same seed, same result; any thread count and speculation width, same result") {

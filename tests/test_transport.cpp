@@ -624,12 +624,12 @@ TEST_CASE("transport start: a picture that fills the receiver lights its dark ed
 TEST_CASE("transport start: a mirror focusing onto a receiver a third its width lights the receiver's edges") {
     // A 10 cm mirror under collimated light throws a uniform target onto a 3 cm receiver
     // 0.5 m away: the flat mirror's footprint reaches 5 cm from the receiver's centre,
-    // beyond the 1.5 receiver widths the transport grid spans. Cut there, the light
-    // beyond piled onto the grid's edge and the receiver's outer pixels stayed dark (here
-    // the worst edge got nothing and the start's error was 0.169; at 200 pixels the outer
-    // three got nothing, a cell-mean error of 0.129). With the footprint shrunk onto the
-    // grid (OtGrid::source_scale, which leaves the map as it is) the worst edge gets
-    // 97.5 % and the error is 0.011 (0.027 at 200 pixels).
+    // beyond the transport grid's reach (footprint_reach: 2.25 cm). Cut there (the grid
+    // reached 4.5 cm then), the light beyond piled onto the grid's edge and the receiver's
+    // outer pixels stayed dark: here the worst edge got nothing and the start's error was
+    // 0.169 (at 200 pixels the outer three got nothing, a cell-mean error of 0.129). With
+    // the footprint shrunk onto the grid (OtGrid::source_scale, which leaves the map as it
+    // is) the worst edge gets 99.6 % and the error is 0.013 (0.017 at 200 pixels).
     Scene s = testing::basic_scene(60);
     s.surface.size = {0.1, 0.1};
     s.receiver.size = {0.03, 0.03};
@@ -637,7 +637,7 @@ TEST_CASE("transport start: a mirror focusing onto a receiver a third its width 
     const ImageD target = ImageD::Constant(60, 60, 1.0);
     const Heightmap initial = testing::surface_for(s, 61);
     const OtGrid g = transport_grid(s, flat_footprint(s, initial), TransportOptions{});
-    CHECK(g.source_scale == doctest::Approx(0.045 / 0.05).epsilon(0.02));
+    CHECK(g.source_scale == doctest::Approx(0.0225 / 0.05).epsilon(0.02));
     const DesignStart st = first_solve_start(s, initial, target, 3, 2);
     REQUIRE(st.report.used == StartKind::transport);
     MESSAGE("worst edge ratio " << worst_edge_ratio(s, st.surface, target) << ", start error " << st.report.error);

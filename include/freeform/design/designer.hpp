@@ -134,11 +134,29 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
         levels[k].time_share = n == 0 ? 1.0 : shares[n - 1][std::min(k, n - 1)];
 }
 
+// The receiver pixels that a surface axis (world direction `axis`) spans once the light
+// fills the receiver: those along the receiver axis it lies closest to, projected onto
+// the receiver's plane; the longer side's when it stands about upright on that plane
+// (|cos| < 0.2 to both axes).
+inline int receiver_pixels_along(const Receiver& receiver, Vec3d axis) {
+    const double cu = std::abs(dot(axis, receiver.frame.u)), cv = std::abs(dot(axis, receiver.frame.v));
+    if (std::max(cu, cv) < 0.2) return std::max(receiver.width, receiver.height);
+    return cu >= cv ? receiver.width : receiver.height;
+}
+
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution: about one
 //   cell per receiver pixel along the longer side, 2m − 1 vertices with m = r/2 + 1 made
-//   odd (201 for a 200² receiver, 53 for the 50² headlight, where the reference used
-//   13²); the shorter side follows the surface's aspect ratio. Photographs used to get
+//   odd for r pixels (201 for a 200² receiver, 53 for the 50² headlight, where the
+//   reference used 13²); the shorter side follows the surface's aspect ratio, and each
+//   side has at least the vertices of the pixels it spans (receiver_pixels_along). That
+//   floor came in on 2026-11-30: a 20 × 4 cm mirror throwing a checkerboard onto a 200²
+//   receiver got 201 × 41 vertices, five pixels a cell across the strip; its start drew
+//   arcs in the dark squares (cell means 0.051, `design --start-only`; 201 × 101 gave
+//   0.029, 201 × 201 0.026) and a 30 s design ended at 0.0498, against 0.0231 on
+//   201 × 201. Not the floor alone: text on a 300 × 100 receiver from a 120 × 60 mm
+//   mirror ended at 0.0492 on 301 × 101 against 0.0480 on the aspect's 301 × 151 (30 s).
+//   Photographs used to get
 //   2r + 1 (the reference's 401² for a 200² photo); judged by cell means of the exported
 //   mesh (issue 22, benchmarks/results/physical, seed 1 at 15 / 30 / 60 s) 201² beat
 //   401² on the camera photograph (0.0404 / 0.0378 / 0.0357 against 0.0454 / 0.0425 /
@@ -154,14 +172,16 @@ inline void assign_time_shares(std::vector<LevelPlan>& levels) {
 //   when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
 inline std::vector<LevelPlan> plan_levels(const Scene& scene, const DesignOptions& options) {
-    const int rx = scene.receiver.width, ry = scene.receiver.height, r = std::max(rx, ry);
+    const int rx = scene.receiver.width, ry = scene.receiver.height;
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
-        int mesh = 2 * ((r / 2 + 1) | 1) - 1;
-        mesh = std::max(5, mesh | 1);
+        const auto vertices = [](int pixels) { return std::max(5, (2 * ((pixels / 2 + 1) | 1) - 1) | 1); };
+        const int mesh = vertices(std::max(rx, ry));
         const Vec2d size = scene.surface.size;
         mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
         my = size.x >= size.y ? std::max(3, int(std::lround((mesh - 1) * size.y / size.x)) + 1) : mesh;
+        mx = std::max(mx, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.u)));
+        my = std::max(my, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.v)));
     }
     const auto coarser = [](int m) { return std::max(3, 2 * ((m - 1) / 4) + 1); };  // about half: 101, 51, 25, 13, 7
     std::vector<LevelPlan> levels;

@@ -475,15 +475,23 @@ inline FlatFootprint flat_footprint(const Scene& scene, const Heightmap& surface
     return fp;
 }
 
+// How far the transport grid reaches from the receiver's centre, in receiver widths
+// (heights): a flat footprint reaching farther is shrunk about that centre until it fits
+// (OtGrid::source_scale: the map is the same, docs/architecture.md §4b). A quarter of the
+// receiver's width beyond each edge: the map must run on past the receiver's edges for
+// the aims that continue it there (a raised rim's edge vertex, the border goals). Onto
+// the receiver itself (0.5) a raised rim's worst edge got 42 % of its light and the
+// reweighted second solve stopped gaining (tests/test_transport.cpp), 84 % at 0.6, 99 %
+// at 0.75; the focusing scenes below did as well at 0.75 as at 0.5. Until 2026-11-30 the
+// grid reached 1.5 widths and cut the footprint there.
+inline constexpr double footprint_reach = 0.75;
+
 // The transport grid of a scene whose flat surface lands the light on `fp`: it covers the
-// receiver and the footprint; a footprint reaching more than 1.5 receiver widths (or
-// heights) from the receiver's centre is shrunk about that centre until it fits
-// (OtGrid::source_scale: the map is the same, and the grid stays fine enough for the
-// receiver's pixels). Until 2026-11-30 it was cut there: the light landing beyond was
-// piled onto the grid's edge, and a 10 cm mirror focusing onto a 3 cm receiver 0.5 m
-// away started at a cell-mean error of 0.129, its receiver's outer three pixels dark and
-// the next two twice too bright (0.024 with a 4 cm receiver, whose footprint fitted).
-// The grid is fine enough to resolve the receiver's pixels by `cells_per_pixel` cells and
+// receiver and the footprint, the latter shrunk to footprint_reach. Cut there instead (its
+// light beyond piled onto the grid's edge), a 10 cm mirror focusing a checkerboard onto a
+// 3 cm receiver 0.5 m away started at a cell-mean error of 0.129, the receiver's outer
+// three pixels dark; shrunk onto 1.5 widths, 0.027 (1.5 cells a pixel on a 960² grid);
+// onto 0.75 widths, 0.017 (3 cells a pixel). The grid is fine enough to resolve the receiver's pixels by `cells_per_pixel` cells and
 // the (shrunk) footprint by about 100 cells along its longer side, with at most
 // `max_grid` cells a side; the sides are rounded up to FFT-friendly counts (the Poisson solves'
 // transforms), the extra cells padding it evenly. Only the pixels are refined: where the
@@ -493,7 +501,7 @@ inline OtGrid transport_grid(const Scene& scene, const FlatFootprint& fp, const 
     const Receiver& rec = scene.receiver;
     const double pu = rec.size.x / rec.width, pv = rec.size.y / rec.height;
     double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
-    const double limit_u = 1.5 * rec.size.x, limit_v = 1.5 * rec.size.y;
+    const double limit_u = footprint_reach * rec.size.x, limit_v = footprint_reach * rec.size.y;
     const double reach_u = std::max(-fp.lo_u, fp.hi_u), reach_v = std::max(-fp.lo_v, fp.hi_v);
     const double scale = std::min({1.0, reach_u > limit_u ? limit_u / reach_u : 1.0, reach_v > limit_v ? limit_v / reach_v : 1.0});
     lo_u = std::min(lo_u, scale * fp.lo_u), hi_u = std::max(hi_u, scale * fp.hi_u);
@@ -535,8 +543,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const Eigen::ArrayXXd nu = (oy * flipped.matrix() * ox.transpose()).array().max(0.0);
 
     // μ: the light's rays, landed by the flat surface.
-    const double scale = g.source_scale;
-    const double fp_cells = std::max(1.0, scale * scale * (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
+    const double scale = g.source_scale, fp_cells = std::max(1.0, scale * scale * (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
     Light light = scene.light;
     light.rays = std::clamp<std::int64_t>(std::int64_t(options.rays_per_grid_cell * fp_cells), 4096, 4'000'000);
     const RaySet rays = generate_rays(light, surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL));
