@@ -491,10 +491,11 @@ inline constexpr double footprint_reach = 0.75;
 // light beyond piled onto the grid's edge), a 10 cm mirror focusing a checkerboard onto a
 // 3 cm receiver 0.5 m away started at a cell-mean error of 0.129, the receiver's outer
 // three pixels dark; shrunk onto 1.5 widths, 0.027 (1.5 cells a pixel on a 960² grid);
-// onto 0.75 widths, 0.017 (3 cells a pixel). The grid is fine enough to resolve the receiver's pixels by `cells_per_pixel` cells and
-// the (shrunk) footprint by about 100 cells along its longer side, with at most
-// `max_grid` cells a side; the sides are rounded up to FFT-friendly counts (the Poisson solves'
-// transforms), the extra cells padding it evenly. Only the pixels are refined: where the
+// onto 0.75 widths, 0.017 (3 cells a pixel). The grid is fine enough to resolve the
+// receiver's pixels by `cells_per_pixel` cells and the (shrunk) footprint by about 100
+// cells along its longer side, with at most `max_grid` cells a side; the sides are
+// rounded up to FFT-friendly counts (the Poisson solves' transforms), the extra cells
+// padding it evenly. Only the pixels are refined: where the
 // footprint sets the cell (a 50² receiver of 4 mm pixels, a footprint of 1 mm cells), a
 // finer grid gave worse starts (the headlight: 0.015 / 0.021 / 0.024 at 1 / 2 / 3 times).
 inline OtGrid transport_grid(const Scene& scene, const FlatFootprint& fp, const TransportOptions& options) {
