@@ -504,7 +504,7 @@ inline OtGrid transport_grid(const Scene& scene, const FlatFootprint& fp, const 
     double lo_u = -0.5 * rec.size.x, hi_u = 0.5 * rec.size.x, lo_v = -0.5 * rec.size.y, hi_v = 0.5 * rec.size.y;
     const double limit_u = footprint_reach * rec.size.x, limit_v = footprint_reach * rec.size.y;
     const double reach_u = std::max(-fp.lo_u, fp.hi_u), reach_v = std::max(-fp.lo_v, fp.hi_v);
-    const double scale = std::min({1.0, reach_u > limit_u ? limit_u / reach_u : 1.0, reach_v > limit_v ? limit_v / reach_v : 1.0});
+    const double scale = std::min(limit_u / std::max(reach_u, limit_u), limit_v / std::max(reach_v, limit_v));
     lo_u = std::min(lo_u, scale * fp.lo_u), hi_u = std::max(hi_u, scale * fp.hi_u);
     lo_v = std::min(lo_v, scale * fp.lo_v), hi_v = std::max(hi_v, scale * fp.hi_v);
     const double fp_extent = scale * std::max(fp.hi_u - fp.lo_u, fp.hi_v - fp.lo_v);
