@@ -209,11 +209,11 @@ TEST_CASE("refinement keeps the corners and resamples a coarse grid exactly onto
 
 // ------------------------------------------------------------------------- the plan
 
-TEST_CASE("plan_levels: a 200² receiver gives 51²/101²/201² meshes on 50²/100²/200²") {
+TEST_CASE("plan_levels: a 200² receiver gives 101²/201²/401² meshes on 50²/100²/200²") {
     Scene s = auto_scene(200);
     const auto levels = plan_levels(s, {});
     REQUIRE(levels.size() == 3);
-    const int mesh[] = {51, 101, 201}, res[] = {50, 100, 200};
+    const int mesh[] = {101, 201, 401}, res[] = {50, 100, 200};
     for (std::size_t k = 0; k < 3; ++k) {
         CAPTURE(k);
         CHECK(levels[k].mesh_x == mesh[k]);
@@ -240,29 +240,29 @@ TEST_CASE("plan_levels: a 200² receiver gives 51²/101²/201² meshes on 50²/1
     CHECK(given[2].mesh_x == 101);
 }
 
-TEST_CASE("plan_levels: a 50² headlight receiver gives 27² and 53² meshes on 25² and 50²") {
+TEST_CASE("plan_levels: a 50² headlight receiver gives 51² and 101² meshes on 25² and 50²") {
     const Scene s = auto_scene(50);
     const auto levels = plan_levels(s, {});
     REQUIRE(levels.size() == 2);
-    CHECK(levels[0].mesh_x == 27);
-    CHECK(levels[0].mesh_y == 27);
+    CHECK(levels[0].mesh_x == 51);
+    CHECK(levels[0].mesh_y == 51);
     CHECK(levels[0].resolution_x == 25);
     CHECK(levels[0].resolution_y == 25);
-    CHECK(levels[1].mesh_x == 53);
-    CHECK(levels[1].mesh_y == 53);
+    CHECK(levels[1].mesh_x == 101);
+    CHECK(levels[1].mesh_y == 101);
     CHECK(levels[1].resolution_x == 50);
     CHECK(levels[1].resolution_y == 50);
     CHECK(levels[0].time_share + levels[1].time_share == doctest::Approx(1.0));
 }
 
 TEST_CASE("plan_levels: the mesh follows the receiver, whatever the target (photographs too)") {
-    // Photographs got 2r + 1 (401² for 200²) before issue 22; judged by cell means the
-    // receiver's own rule did better (designer.hpp, plan_levels).
+    // Two cells a pixel for every target: the camera photograph ended a 60 s design at
+    // 0.0135 on 401² against 0.0169 on 201² (designer.hpp, plan_levels).
     const Scene s = auto_scene(200);
     const auto levels = plan_levels(s, {});
     REQUIRE(levels.size() == 3);
-    CHECK(levels.back().mesh_x == 201);
-    CHECK(levels.back().mesh_y == 201);
+    CHECK(levels.back().mesh_x == 401);
+    CHECK(levels.back().mesh_y == 401);
     CHECK(levels.back().resolution_x == 200);
     CHECK(levels[0].resolution_x == 50);
     CHECK(levels[1].resolution_x == 100);
@@ -296,10 +296,10 @@ TEST_CASE("plan_levels: multilevel off gives one level at the final mesh and res
     o.multilevel = false;
     const auto levels = plan_levels(s, o);
     REQUIRE(levels.size() == 1);
-    CHECK(levels[0].mesh_x == 201);
+    CHECK(levels[0].mesh_x == 401);
     CHECK(levels[0].resolution_x == 200);
     CHECK(levels[0].time_share == 1.0);
-    CHECK(levels[0].iterations == 40LL * 201 * 201);
+    CHECK(levels[0].iterations == 40LL * 401 * 401);
 }
 
 TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every level") {
@@ -309,8 +309,8 @@ TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every lev
     s.surface.size = {0.12, 0.08};
     const auto levels = plan_levels(s, {});
     REQUIRE(levels.size() == 3);
-    CHECK(levels.back().mesh_x == 241);
-    CHECK(levels.back().mesh_y == 161);
+    CHECK(levels.back().mesh_x == 481);
+    CHECK(levels.back().mesh_y == 321);
     for (const auto& l : levels) {
         CHECK(l.resolution_x * 2 == l.resolution_y * 3);
         CHECK(double(l.mesh_x - 1) / double(l.mesh_y - 1) == doctest::Approx(1.5).epsilon(0.1));
@@ -318,27 +318,51 @@ TEST_CASE("plan_levels: a non-square surface keeps its aspect ratio on every lev
 }
 
 TEST_CASE("plan_levels: each side of the surface gets at least the pixels of the receiver axis it lies along") {
-    // A 20 × 4 cm strip under a 200² receiver: the aspect alone gave 201 × 41, five pixels
-    // a cell across the strip (its start drew arcs in a checkerboard's dark squares and a
-    // 30 s design ended at 0.0498 against 0.0231 on 201 × 201).
+    // A 20 × 4 cm strip under a 200² receiver: the aspect alone gave 201 × 41 at one cell
+    // a pixel, five pixels a cell across the strip (its start drew arcs in a
+    // checkerboard's dark squares and a 30 s design ended at 0.0498 against 0.0231 on
+    // 201 × 201). At two cells a pixel: 401 × 401, not 401 × 81.
     Scene s = basic_scene(200, 16);
     s.surface.size = {0.2, 0.04};
-    CHECK(plan_levels(s, {}).back().mesh_x == 201);
-    CHECK(plan_levels(s, {}).back().mesh_y == 201);
+    CHECK(plan_levels(s, {}).back().mesh_x == 401);
+    CHECK(plan_levels(s, {}).back().mesh_y == 401);
     // A 300 × 100 receiver: the strip's short side lies along the receiver's 100 pixels.
     s.receiver.width = 300, s.receiver.height = 100, s.receiver.size = {0.3, 0.1};
-    CHECK(plan_levels(s, {}).back().mesh_x == 301);
-    CHECK(plan_levels(s, {}).back().mesh_y == 101);
+    CHECK(plan_levels(s, {}).back().mesh_x == 601);
+    CHECK(plan_levels(s, {}).back().mesh_y == 201);
     // The same receiver turned a quarter (its up along the strip): the short side now
-    // lies along the receiver's 300 pixels, the long one along its 100.
+    // lies along the receiver's 300 pixels, the long one along its 100. Two cells a pixel
+    // would be 601 × 601, past auto_mesh_max_vertices: both sides get fewer, alike.
     s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {1, 0, 0}, "receiver");
-    CHECK(plan_levels(s, {}).back().mesh_x == 301);
-    CHECK(plan_levels(s, {}).back().mesh_y == 301);
+    CHECK(plan_levels(s, {}).back().mesh_x == 513);
+    CHECK(plan_levels(s, {}).back().mesh_y == 513);
     // Where the aspect gives more than the floor it stays: 120 × 60 mm onto 300 × 100.
     s.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
     s.surface.size = {0.12, 0.06};
-    CHECK(plan_levels(s, {}).back().mesh_x == 301);
-    CHECK(plan_levels(s, {}).back().mesh_y == 151);
+    CHECK(plan_levels(s, {}).back().mesh_x == 601);
+    CHECK(plan_levels(s, {}).back().mesh_y == 301);
+}
+
+TEST_CASE("plan_levels: two cells a pixel while the mesh keeps within auto_mesh_max_vertices, one at the least") {
+    // 256² is the largest square receiver that keeps two cells a pixel (513², a hair past
+    // 2^18 = 262,144 vertices: scaled down by the square root of the excess, its 511
+    // cells round to the same 513 vertices).
+    const auto last = [](int pixels) { return plan_levels(auto_scene(pixels), {}).back(); };
+    CHECK(last(128).mesh_x == 257);
+    CHECK(last(300).mesh_x == 513);  // 601² would be 361,201 vertices: 1.70 cells a pixel
+    CHECK(last(400).mesh_x == 513);  // 1.28 cells a pixel
+    // At 512² and above, one cell a pixel: the designs of before (a 120 s design of the
+    // camera photograph on 1025² ran its start and one level of three and ended worse).
+    CHECK(last(512).mesh_x == 513);
+    CHECK(last(1024).mesh_x == 1025);
+    for (int pixels : {128, 200, 256, 300, 400, 512, 700}) {
+        CAPTURE(pixels);
+        const LevelPlan l = last(pixels);
+        CHECK(l.mesh_x == l.mesh_y);
+        CHECK(l.mesh_x % 2 == 1);
+        CHECK(l.mesh_x - 1 >= pixels);  // never less than a cell a pixel
+        if (l.mesh_x - 1 > pixels) CHECK(double(l.mesh_x) * l.mesh_y <= 1.01 * auto_mesh_max_vertices);
+    }
 }
 
 // ------------------------------------------------------------------------- reproducibility

@@ -19,6 +19,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <tuple>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -144,44 +145,73 @@ inline int receiver_pixels_along(const Receiver& receiver, Vec3d axis) {
     return cu >= cv ? receiver.width : receiver.height;
 }
 
+// Mesh "auto": cells per receiver pixel along each side, while the final mesh keeps within
+// auto_mesh_max_vertices (above, fewer cells per pixel, down to one). Measured 2026-11-30
+// (`freeform design`, seed 1, 2 cores, each scene's mesh set to one and to two cells a
+// pixel; designed surface / the sag table, both converged cell means; docs/measures.md,
+// "The mesh: two cells a pixel"):
+//   letter E 60 s 0.0164 / 0.0172 on 201² against 0.0136 / 0.0141 on 401², V 0.0118 /
+//   0.0123 against 0.0101 / 0.0104, @ 0.0271 / 0.0288 against 0.0200 / 0.0211, the camera
+//   photograph 60 s 0.0164 / 0.0169 against 0.0132 / 0.0135, text on 300 × 100 in 30 s
+//   0.0468 / 0.0497 on 301 × 151 against 0.0355 / 0.0355 on 601 × 301.
+// Most of it is the transport start's (E 0.0214 → 0.0144): where the map jumps (between
+// letters, the E's notches, a photograph's sharp edges) a smooth surface sweeps one
+// mesh cell's light across the jump, and a cell half as wide sweeps half the light. At
+// 512² it is too much model for 120 s: the camera photograph on 1025² ran its start and
+// one level of three (0.0145 / 0.0134, about 8 GB) against 513²'s 0.0118 / 0.0111.
+inline constexpr double auto_mesh_cells_per_pixel = 2;
+inline constexpr double auto_mesh_max_vertices = 1 << 18;  // 512², about 2 GB in a design
+
 // The default schedule for a scene: no more model than the case needs.
-//   final mesh: the scene's, or (mesh "auto") from the receiver resolution: about one
-//   cell per receiver pixel along the longer side, 2m − 1 vertices with m = r/2 + 1 made
-//   odd for r pixels (201 for a 200² receiver, 53 for the 50² headlight, where the
-//   reference used 13²); the shorter side follows the surface's aspect ratio, and each
+//   final mesh: the scene's, or (mesh "auto") from the receiver resolution: c cells per
+//   receiver pixel along the longer side (auto_mesh_cells_per_pixel, fewer where the mesh
+//   would pass auto_mesh_max_vertices), 2m − 1 vertices with m = c·r/2 + 1 made odd for r
+//   pixels (401 for a 200² receiver, 101 for the 50² headlight, where the reference used
+//   13²; 513 for 512²); the shorter side follows the surface's aspect ratio, and each
 //   side has at least the vertices of the pixels it spans (receiver_pixels_along). That
-//   floor came in on 2026-11-30: a 20 × 4 cm mirror throwing a checkerboard onto a 200²
-//   receiver got 201 × 41 vertices, five pixels a cell across the strip; its start drew
-//   arcs in the dark squares (cell means 0.051, `design --start-only`; 201 × 101 gave
-//   0.029, 201 × 201 0.026) and a 30 s design ended at 0.0498, against 0.0231 on
-//   201 × 201. Not the floor alone: text on a 300 × 100 receiver from a 120 × 60 mm
-//   mirror ended at 0.0492 on 301 × 101 against 0.0480 on the aspect's 301 × 151 (30 s).
-//   Photographs used to get
-//   2r + 1 (the reference's 401² for a 200² photo); judged by cell means of the exported
-//   mesh (issue 22, benchmarks/results/physical, seed 1 at 15 / 30 / 60 s) 201² beat
-//   401² on the camera photograph (0.0404 / 0.0378 / 0.0357 against 0.0454 / 0.0425 /
-//   0.0404) and on the study's grey landscape (0.0269 / 0.0265 / 0.0261 against
-//   0.0262 / 0.0306 / 0.0296, which got worse with time): the finer mesh steered single
-//   rays, and its exported facets fit fewer subdivisions in the triangle budget. Measured
-//   at equal time before that (issue 11; docs/performance.md, "The "auto" mesh rule (err
-//   measure)"; git show 63973b0:benchmarks/results/mesh_rule/REPORT.md): the binary rule's
-//   former m (101² for 200²) ended above 2m − 1 on every seed of ten binary targets. The
-//   earlier study found 13² twice the error of 25² on the headlight.
+//   floor came in on 2026-11-30 (at one cell a pixel): a 20 × 4 cm mirror throwing a
+//   checkerboard onto a 200² receiver got 201 × 41 vertices, five pixels a cell across
+//   the strip; its start drew arcs in the dark squares (cell means 0.051, `design
+//   --start-only`; 201 × 101 gave 0.029, 201 × 201 0.026) and a 30 s design ended at
+//   0.0498, against 0.0231 on 201 × 201. Not the floor alone: text on a 300 × 100
+//   receiver from a 120 × 60 mm mirror ended at 0.0492 on 301 × 101 against 0.0480 on
+//   the aspect's 301 × 151 (30 s).
+//   History: photographs used to get 2r + 1 (the reference's 401² for a 200² photo) and
+//   lost to r + 1 in issue 22 (benchmarks/results/physical, seed 1 at 15 / 30 / 60 s: the
+//   camera 0.0404 / 0.0378 / 0.0357 against 0.0454 / 0.0425 / 0.0404), judged then by the
+//   exported facets at 4 rays per mesh cell: the finer mesh steered single rays and fit
+//   fewer facet subdivisions. With 32 rays per mesh cell (min_rays_per_mesh_cell) and the
+//   smooth part judged (STEP, the sag table), two cells a pixel win on photographs too
+//   (above). Before issue 11 binary targets had half a cell a pixel (101² for 200²),
+//   which ended above one cell a pixel on every seed of ten binary targets (docs/
+//   performance.md, "The "auto" mesh rule (err measure)"); the earlier study found 13²
+//   twice the error of 25² on the headlight.
 //   levels: halve mesh and resolution down to 25 px / 7 vertices, at most 3 (a 200²
-//   receiver: 51², 101², 201² on 50, 100, 200 px; the reference had 25² → 101²); one level
-//   when `multilevel` is off.
+//   receiver: 101², 201², 401² on 50, 100, 200 px; the reference had 25² → 101²); one
+//   level when `multilevel` is off.
 //   budgets: 40 iterations per vertex of the level; time shares 15 / 30 / 55 %.
 inline std::vector<LevelPlan> plan_levels(const Scene& scene, const DesignOptions& options) {
     const int rx = scene.receiver.width, ry = scene.receiver.height;
     int mx = scene.surface.nx, my = scene.surface.ny;
     if (mx <= 0 || my <= 0) {
-        const auto vertices = [](int pixels) { return std::max(5, (2 * ((pixels / 2 + 1) | 1) - 1) | 1); };
-        const int mesh = vertices(std::max(rx, ry));
-        const Vec2d size = scene.surface.size;
-        mx = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
-        my = size.x >= size.y ? std::max(3, int(std::lround((mesh - 1) * size.y / size.x)) + 1) : mesh;
-        mx = std::max(mx, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.u)));
-        my = std::max(my, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.v)));
+        const auto auto_mesh = [&](double cells_per_pixel) {
+            const auto vertices = [&](int pixels) {
+                const int cells = int(cells_per_pixel * pixels + 1e-9);
+                return std::max(5, (2 * ((cells / 2 + 1) | 1) - 1) | 1);
+            };
+            const int mesh = vertices(std::max(rx, ry));
+            const Vec2d size = scene.surface.size;
+            int x = size.x >= size.y ? mesh : std::max(3, int(std::lround((mesh - 1) * size.x / size.y)) + 1);
+            int y = size.x >= size.y ? std::max(3, int(std::lround((mesh - 1) * size.y / size.x)) + 1) : mesh;
+            x = std::max(x, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.u)));
+            y = std::max(y, vertices(receiver_pixels_along(scene.receiver, scene.surface.frame.v)));
+            return std::pair<int, int>{x, y};
+        };
+        std::tie(mx, my) = auto_mesh(auto_mesh_cells_per_pixel);
+        const double vertices = double(mx) * double(my);
+        if (vertices > auto_mesh_max_vertices)
+            std::tie(mx, my) = auto_mesh(std::max(1.0, auto_mesh_cells_per_pixel *
+                                                           std::sqrt(auto_mesh_max_vertices / vertices)));
     }
     const auto coarser = [](int m) { return std::max(3, 2 * ((m - 1) / 4) + 1); };  // about half: 101, 51, 25, 13, 7
     std::vector<LevelPlan> levels;
