@@ -158,9 +158,9 @@ inline int receiver_pixels_along(const Receiver& receiver, Vec3d axis) {
 // letters, the E's notches, a photograph's sharp edges) a smooth surface sweeps one
 // mesh cell's light across the jump, and a cell half as wide sweeps half the light. At
 // 512² it is too much model for 120 s: the camera photograph on 1025² ran its start and
-// one level of three (0.0145 / 0.0134, about 8 GB) against 513²'s 0.0118 / 0.0111.
+// one level of three (0.0145 / 0.0134, holding about 8 GB) against 513²'s 0.0118 / 0.0117.
 inline constexpr double auto_mesh_cells_per_pixel = 2;
-inline constexpr double auto_mesh_max_vertices = 1 << 18;  // 512², about 2 GB in a design
+inline constexpr double auto_mesh_max_vertices = 1 << 18;  // 512²
 
 // The default schedule for a scene: no more model than the case needs.
 //   final mesh: the scene's, or (mesh "auto") from the receiver resolution: c cells per
