@@ -208,10 +208,10 @@ inline std::vector<LevelPlan> plan_levels(const Scene& scene, const DesignOption
             return std::pair<int, int>{x, y};
         };
         std::tie(mx, my) = auto_mesh(auto_mesh_cells_per_pixel);
-        const double vertices = double(mx) * double(my);
-        if (vertices > auto_mesh_max_vertices)
-            std::tie(mx, my) = auto_mesh(std::max(1.0, auto_mesh_cells_per_pixel *
-                                                           std::sqrt(auto_mesh_max_vertices / vertices)));
+        const double count = double(mx) * double(my);
+        if (count > auto_mesh_max_vertices)
+            std::tie(mx, my) =
+                auto_mesh(std::max(1.0, auto_mesh_cells_per_pixel * std::sqrt(auto_mesh_max_vertices / count)));
     }
     const auto coarser = [](int m) { return std::max(3, 2 * ((m - 1) / 4) + 1); };  // about half: 101, 51, 25, 13, 7
     std::vector<LevelPlan> levels;
