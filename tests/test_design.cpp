@@ -572,6 +572,9 @@ struct TowardsZeroTerm {
 TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the start alone, the callbacks") {
     SmallCase c = small_case();
     c.scene.target = TargetSpec{};  // a transport start, as `freeform design` makes
+    // The annealed surface always delivered, to compare with the annealing core's: on this
+    // case the start traces better (keep_better_start is the next test case's).
+    c.options.keep_better_start = false;
     const auto job = [&] { return DesignJob{c.scene, c.options}; };
     DesignSetup quick;
     quick.export_checks = false;
@@ -630,9 +633,11 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
         CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
         CHECK(phases == std::vector<std::string>{finding_the_start(c.scene)});
         CHECK(d.fitted.error > 0);
+        CHECK_FALSE(d.delivered);  // nothing annealed to compare the start with
     }
     SUBCASE("the callbacks: the phases in order, and a progress callback that stops the design") {
         DesignSetup setup;  // the export and its checks too
+        c.options.keep_better_start = true;
         std::vector<std::string> phases;
         int reports = 0;
         setup.callbacks.phase = [&](const std::string& what) { phases.push_back(what); };
@@ -641,8 +646,72 @@ TEST_CASE("design(job, target, setup): penalties, a start of the caller's, the s
         CHECK(reports == 2);
         CHECK(d.result.stopped_early);
         CHECK(phases == std::vector<std::string>{finding_the_start(c.scene),
+                                                 "tracing the annealed surface against its start",
                                                  "exporting the surface and tracing the exported mesh"});
         CHECK_FALSE(d.exported.fabrication.mesh.triangles.empty());
+    }
+}
+
+// optimise.keep_better_start: finish_design traces the annealed surface and its start
+// as the designed figure traces a surface (designed cell means, error_physical's rays) and
+// delivers the lower, saying which; a design hands it the start it began from, on the
+// final mesh.
+TEST_CASE("finish_design delivers the start where it traces better than the annealed surface, and says which") {
+    SmallCase c = small_case();
+    c.scene.target = TargetSpec{};  // a transport start
+    PlannedDesign plan = plan_design(DesignJob{c.scene, c.options});
+    const Heightmap flat = plan.initial;
+    const DesignStart start = make_design_start(plan.scene, plan.initial, c.target, plan.options, 1);
+    REQUIRE(start.report.used == StartKind::transport);
+    const auto traced = [&](const Heightmap& h) {
+        return designed_cell_means(plan.scene, h, c.target, physical_cell_mean_options(c.options.seed), 1).error;
+    };
+    const double flat_error = traced(flat), start_error = traced(start.surface);
+    REQUIRE(start_error < flat_error);
+    // `annealed` finished as a design that began from `begun`.
+    const auto finished = [&](const Heightmap& annealed, std::optional<Heightmap> begun, bool keep) {
+        DesignResult r;
+        r.surface = annealed;
+        r.start_surface = std::move(begun);
+        DesignOptions o = plan.options;
+        o.keep_better_start = keep;
+        return finish_design(plan.scene, o, std::move(r), c.target, {}, false);
+    };
+
+    SUBCASE("annealing left it worse than its start: the start is delivered, and traced as delivered") {
+        const CompletedDesign d = finished(flat, start.surface, true);
+        REQUIRE(d.delivered);
+        CHECK(d.delivered->start);
+        CHECK(same_bits(d.delivered->start_error, start_error));
+        CHECK(same_bits(d.delivered->annealed_error, flat_error));
+        CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
+        CHECK_FALSE(d.result.start_surface);
+        CHECK(same_bits(d.fitted.error, trace_design(plan.scene, start.surface, c.target, c.options.seed, 1).error));
+    }
+    SUBCASE("annealing improved on its start: the annealed surface is delivered") {
+        const CompletedDesign d = finished(start.surface, flat, true);
+        REQUIRE(d.delivered);
+        CHECK_FALSE(d.delivered->start);
+        CHECK(same_bits(d.delivered->annealed_error, start_error));
+        CHECK(same_bits(d.delivered->start_error, flat_error));
+        CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
+    }
+    SUBCASE("switched off, no start, or a start on another mesh: the annealed surface, not compared") {
+        Heightmap coarse = surface_for(plan.scene, 9);
+        for (const auto& [begun, keep] : {std::pair{std::optional<Heightmap>(start.surface), false},
+                                          std::pair{std::optional<Heightmap>(), true},
+                                          std::pair{std::optional<Heightmap>(coarse), true}}) {
+            const CompletedDesign d = finished(flat, begun, keep);
+            CHECK_FALSE(d.delivered);
+            CHECK(same_bits(d.result.surface.heights(), flat.heights()));
+        }
+    }
+    SUBCASE("a design hands on the start it began from, on the final mesh (its first level's is 9²)") {
+        const DesignResult r = design(plan.scene, flat, c.target, plan.options, never_stop());
+        REQUIRE(r.start_surface);
+        CHECK(r.start_surface->nx() == SmallCase::mesh);
+        CHECK(same_bits(r.start_surface->heights(), start.surface.heights()));
+        CHECK(r.surface.nx() == SmallCase::mesh);
     }
 }
 
@@ -703,6 +772,7 @@ struct OfferedDevice {
 
     explicit OfferedDevice(bool design_on_cpu = true) {
         c.scene.target = TargetSpec{};
+        c.options.keep_better_start = false;  // the annealed heights compared, not the start's
         quick.export_checks = false;
         offer.name = "host kernels";
         offer.window = 6;

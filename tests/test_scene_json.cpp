@@ -573,6 +573,7 @@ TEST_CASE("optimise keys: each reaches its module's option field") {
         {"export_tolerance", 0.1, [](const DesignOptions& o) { return o.exports.tolerance; }},
         {"export_max_triangles", 5000, [](const DesignOptions& o) { return double(o.exports.max_triangles); }},
         {"smooth_iterations", 2, [](const DesignOptions& o) { return double(o.smooth_iterations); }},
+        {"keep_better_start", false, [](const DesignOptions& o) { return double(o.keep_better_start); }},
         {"coarse_rays_per_cell", 9.0, [](const DesignOptions& o) { return o.coarse_rays_per_cell; }},
         {"min_rays_per_mesh_cell", 48.0, [](const DesignOptions& o) { return o.min_rays_per_mesh_cell; }},
     };

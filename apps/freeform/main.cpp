@@ -413,7 +413,13 @@ void print_forms(const CompletedDesign& d, const json& m) {
         first = false;
     }
     if (forms.contains("designed"))
-        std::printf("  the designed surface itself (heightmap.pfm): %s\n", form_figure(forms, "designed").c_str());
+        std::printf("  the designed surface itself (heightmap.pfm): %s%s\n", form_figure(forms, "designed").c_str(),
+                    !d.delivered ? ""
+                    : d.delivered->start
+                        ? (": the start, delivered because the annealed surface traced worse, " +
+                           fixed(d.delivered->annealed_error, 4) + " (optimise.keep_better_start)")
+                              .c_str()
+                        : ("; its start " + fixed(d.delivered->start_error, 4)).c_str());
     if (!fab.tolerance_met)
         std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at k = %d%s; "
                     "surface.step / surface.dat keep the designed surface\n",

@@ -397,6 +397,29 @@ elseif(GROUP STREQUAL "design")
     endif()
   endif()
 
+  # optimise.keep_better_start (on by default): the annealed surface and its start both
+  # traced, the lower delivered, and the designed surface's figure is the delivered one's.
+  if(EXISTS "${m}")
+    file(READ "${m}" text)
+    string(JSON delivered ERROR_VARIABLE e1 GET "${text}" delivered surface)
+    string(JSON annealed_error ERROR_VARIABLE e2 GET "${text}" delivered annealed_error_physical)
+    string(JSON begun_error ERROR_VARIABLE e3 GET "${text}" delivered start_error_physical)
+    string(JSON designed_error ERROR_VARIABLE e4 GET "${text}" export forms designed error_physical)
+    if(e1 OR e2 OR e3 OR e4)
+      fail("design: metrics.json lacks delivered.* or export.forms.designed (${e1} ${e2} ${e3} ${e4})")
+    elseif(delivered STREQUAL "start")
+      if(NOT (begun_error LESS annealed_error AND designed_error STREQUAL begun_error))
+        fail("design: the start delivered (${begun_error}) against the annealed ${annealed_error}, designed ${designed_error}")
+      endif()
+    elseif(delivered STREQUAL "annealed")
+      if(begun_error LESS annealed_error OR NOT designed_error STREQUAL annealed_error)
+        fail("design: the annealed surface delivered (${annealed_error}) against its start ${begun_error}, designed ${designed_error}")
+      endif()
+    else()
+      fail("design: delivered.surface is '${delivered}'")
+    endif()
+  endif()
+
   # --start-only: the start surface alone, no annealing, the same files; its error is
   # the start error the design reported.
   run(design-start-only design "${DATA}/design-tiny.json" --start-only --out start1 --quiet)

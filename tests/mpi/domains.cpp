@@ -152,6 +152,8 @@ void check_mpi_design() {
         expect(r.replicas->iterations_all == d.result.iterations && d.result.iterations == size * core.iterations,
                "domains: the design's moves are every rank's");
         expect(d.fitted.error > 0 && !d.error_physical(), "finished on rank 0, the export left out");
+        expect(d.delivered && !d.delivered->start && d.delivered->annealed_error < d.delivered->start_error,
+               "rank 0's finish holds the start to compare with, and the annealed surface traces better than flat");
     }
 
     setup.start_only = true;

@@ -101,6 +101,11 @@ struct DesignResult {
     // Where the annealing's windows were judged: "cpu", or "cuda (<device name>)"
     // (optimise.device; design/device.hpp).
     std::string device = "cpu";
+    // The surface the annealing started from, on the final mesh: finish_design delivers
+    // it instead of the annealed one when that traces better (optimise.keep_better_start,
+    // DeliveredSurface in pipeline.hpp). Empty for the start alone, or where the start's
+    // mesh is not the final one.
+    std::optional<Heightmap> start_surface;
     // Where and why the device failed, when it did ("level 2 stage 1: <error>"); the
     // design then went on on the CPU, the same bit for bit. Empty: it did not.
     std::string device_failure;
@@ -306,6 +311,7 @@ inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const Im
     } else {
         shared.report.plan = "all planned levels run";
     }
+    shared.final_surface = start.surface;
     shared.surface = std::move(start.surface);
     const LevelPlan& first = levels[std::size_t(shared.skip)];
     if (start.map && (first.mesh_x != shared.surface.nx() || first.mesh_y != shared.surface.ny())) {
@@ -1107,6 +1113,9 @@ class Designer {
         SharedStart start = d_.replicas.share_start(
             [&] { return prepare_start(d_.scene, std::move(initial), d_.target_image, o, d_.levels, d_.threads); });
         d_.result.start = start.report;
+        const LevelPlan& last = d_.levels.back();
+        if (start.final_surface.nx() == last.mesh_x && start.final_surface.ny() == last.mesh_y)
+            d_.result.start_surface = std::move(start.final_surface);
         if (start.skip > 0) {
             // The schedule goes on as planned from the first level kept (its kernels too:
             // the large ones of the coarse levels would only re-shape what the start has).

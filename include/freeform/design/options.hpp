@@ -101,6 +101,10 @@ struct DesignOptions {
     ScheduleOptions schedule{};    // anneal/schedule.hpp
 
     int smooth_iterations = 0;  // post-processing passes of smooth_heights
+    // Deliver the start instead of the annealed surface when the start's designed cell
+    // means are lower (finish_design, design/pipeline.hpp; docs/measures.md, "Keeping the
+    // start"). Costs one converged trace of the start after the budget.
+    bool keep_better_start = true;
     ExportOptions exports{};
 };
 

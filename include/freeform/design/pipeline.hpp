@@ -169,15 +169,24 @@ inline CellMeanOptions physical_cell_mean_options(std::uint64_t seed) {
     return o;
 }
 
+// The designed surface's cell means as error_physical's "designed" figure traces them.
+inline CellMeans designed_physical_cell_means(const Scene& scene, const DesignOptions& options,
+                                              const Heightmap& surface, const ImageD& target, int threads) {
+    return designed_cell_means(scene, surface, target, physical_cell_mean_options(options.seed), threads);
+}
+
+// `designed`: the surface's designed cell means when the caller has traced them already
+// (designed_physical_cell_means).
 inline ExportChecks check_export(const Scene& scene, const DesignOptions& options, const Heightmap& surface,
-                                 const TracedDesign& fitted, const ImageD& target, int threads) {
+                                 const TracedDesign& fitted, const ImageD& target, int threads,
+                                 std::optional<CellMeans> designed = {}) {
     ExportChecks c{make_fabrication(scene, options.exports, surface), {}, {}, {}, {}, {}, {}, {}, {}};
     c.machining = machining_report(scene, surface, c.fabrication.mesh);
     // The smooth forms cover the exported top: a lens's rim too (export_blank).
     const Heightmap top = export_blank(scene, surface);
     c.spline = step_spline(top, scene.surface.phong_alpha, options.exports.spline);
     c.spline_fit = check_spline_fit(c.spline, top, scene.surface.phong_alpha, spline_samples_per_cell);
-    c.designed = designed_cell_means(scene, surface, target, physical_cell_mean_options(options.seed), threads);
+    c.designed = designed ? std::move(designed) : designed_physical_cell_means(scene, options, surface, target, threads);
 #if defined(FREEFORM_WITH_EMBREE)
     const ExportedGeometry geometry = exported_geometry(scene, surface, c.fabrication.subdivisions);
     const ExportedTrace et = trace_exported(exec::omp_t{threads}, scene, geometry, fitted);
@@ -192,6 +201,18 @@ inline ExportChecks check_export(const Scene& scene, const DesignOptions& option
     return c;
 }
 
+// Which surface a design delivers (optimise.keep_better_start; docs/measures.md, "Keeping
+// the start"): the annealed one, or its start where the start's designed cell means are
+// lower. Annealing minimises its objective on the design's rays; the cell means are what
+// the part is judged by, and the two can part ways (a mesh much finer than its receiver's
+// pixels, a short budget whose first stage has not yet recovered), so both surfaces are
+// finished alike and traced as error_physical's "designed" figure is.
+struct DeliveredSurface {
+    bool start = false;          // the start was delivered
+    double annealed_error = -1;  // designed cell means of the annealed surface, finished
+    double start_error = -1;     // ... of the start, finished alike
+};
+
 // A finished design: the surface as it is milled, and every figure metrics.json reports.
 struct CompletedDesign {
     Scene scene;           // the effective scene (rays per cell raised for the final mesh)
@@ -200,6 +221,10 @@ struct CompletedDesign {
     TracedDesign fitted;   // traced with the scene's seed: the rays it was fitted to
     std::optional<double> error_held_out;  // with the final level's held-out rays (checks on)
     ExportChecks exported;
+    // The annealed surface against its start (empty: keep_better_start off, or no start to
+    // compare with). When the start was delivered, result.surface is the start, finished;
+    // the annealing's own figures (result.value, stages, convergence) stay the annealing's.
+    std::optional<DeliveredSurface> delivered;
     // Wall time after the annealing (result.seconds, the start included, is what
     // optimise.time_budget bounds): smoothing, the tool's cut, the final traces and the
     // export checks. The summary states it beside the budget.
@@ -213,25 +238,58 @@ struct CompletedDesign {
     }
 };
 
-// Smooths (optimise.smooth_iterations), cuts with the tool (surface.tool_radius) and
-// judges an annealed design: the fitted and held-out errors, the export and its cell means
-// (`export_checks`: DesignSetup::export_checks).
+// Smooths (optimise.smooth_iterations) and cuts with the tool (surface.tool_radius) a
+// surface as it is delivered; `tool_cut` gets the most height the cut added.
+inline void finish_surface(const Scene& scene, const DesignOptions& options, Heightmap& surface, double& tool_cut) {
+    if (options.smooth_iterations > 0) smooth_heights(surface, options.smooth_iterations);
+    // The tool's cut last of all: every figure describes what the mill leaves.
+    if (scene.surface.tool_radius > 0)
+        tool_cut = std::max(tool_cut, cut_with_ball(surface, scene.surface.tool_radius));
+}
+
+// Finishes `result`'s surface, and its start alike where options.keep_better_start asks to
+// compare them (DeliveredSurface); result.surface becomes the start where that traces
+// better. Returns the delivered surface's designed cell means when they were traced.
+inline std::optional<CellMeans> deliver_surface(const Scene& scene, const DesignOptions& options,
+                                                DesignResult& result, const ImageD& target,
+                                                std::optional<DeliveredSurface>& delivered) {
+    finish_surface(scene, options, result.surface, result.tool_cut);
+    std::optional<Heightmap> start = std::move(result.start_surface);
+    result.start_surface.reset();
+    if (!options.keep_better_start || !start || start->nx() != result.surface.nx() ||
+        start->ny() != result.surface.ny())
+        return std::nullopt;
+    double start_cut = 0;
+    finish_surface(scene, options, *start, start_cut);
+    CellMeans annealed = designed_physical_cell_means(scene, options, result.surface, target, options.threads);
+    CellMeans from_start = designed_physical_cell_means(scene, options, *start, target, options.threads);
+    delivered = DeliveredSurface{from_start.error < annealed.error, annealed.error, from_start.error};
+    if (!delivered->start) return annealed;
+    result.surface = std::move(*start);
+    result.tool_cut = start_cut;
+    return from_start;
+}
+
+// Smooths (optimise.smooth_iterations), cuts with the tool (surface.tool_radius), keeps the
+// start where it traces better (optimise.keep_better_start) and judges an annealed design:
+// the fitted and held-out errors, the export and its cell means (`export_checks`:
+// DesignSetup::export_checks).
 inline CompletedDesign finish_design(const Scene& scene, const DesignOptions& options, DesignResult result,
                                      const ImageD& target, const DesignCallbacks& callbacks = {},
                                      bool export_checks = true) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (options.smooth_iterations > 0) smooth_heights(result.surface, options.smooth_iterations);
-    // The tool's cut last of all: every figure describes what the mill leaves.
-    if (scene.surface.tool_radius > 0)
-        result.tool_cut = std::max(result.tool_cut, cut_with_ball(result.surface, scene.surface.tool_radius));
+    std::optional<DeliveredSurface> delivered;
+    if (options.keep_better_start && result.start_surface && callbacks.phase)
+        callbacks.phase("tracing the annealed surface against its start");
+    std::optional<CellMeans> designed = deliver_surface(scene, options, result, target, delivered);
     const int threads = options.threads;
-    CompletedDesign d{scene, options, std::move(result), {}, std::nullopt, {}};
+    CompletedDesign d{scene, options, std::move(result), {}, std::nullopt, {}, delivered};
     d.fitted = trace_design(scene, d.result.surface, target, options.seed, threads);
     if (d.result.held_out.total >= 0)
         d.error_held_out = trace_design(scene, d.result.surface, target, d.result.held_out_seed, threads).error;
     if (export_checks) {
         if (callbacks.phase) callbacks.phase("exporting the surface and tracing the exported mesh");
-        d.exported = check_export(scene, options, d.result.surface, d.fitted, target, threads);
+        d.exported = check_export(scene, options, d.result.surface, d.fitted, target, threads, std::move(designed));
     }
     d.finish_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return d;

@@ -15,7 +15,11 @@
 //                                       the result to the others, so that the start (a
 //                                       transport solve: seconds on a photograph) is
 //                                       computed once per design, not once per replica;
-//                                       an exception from make() is raised on every replica
+//                                       an exception from make() is raised on every replica.
+//                                       Its final_surface need only stay with the replica
+//                                       that made it, which must be the one whose design
+//                                       is finished (finish_design keeps the start when it
+//                                       traces better)
 //   std::uint64_t anneal_seed(std::uint64_t stage_seed)
 //                                       the seed of a stage's annealing run on this replica
 //                                       (stage_seed itself on replica 0; the rays, the start

@@ -251,6 +251,11 @@ inline nlohmann::json design_metrics_json(const CompletedDesign& d) {
     m["kernels"] = bank;
     m["levels"] = stage_reports_json(r.stages);
     m["start"] = start_report_json(r.start);
+    if (d.delivered)  // optimise.keep_better_start (design/pipeline.hpp, DeliveredSurface)
+        m["delivered"] = {{"surface", d.delivered->start ? "start" : "annealed"},
+                          {"annealed_error_physical", d.delivered->annealed_error},
+                          {"start_error_physical", d.delivered->start_error},
+                          {"traced", "both surfaces as designed (their Phong patches), finished alike"}};
     m["effective_scene"] = job_to_json(DesignJob{d.scene, d.options});
     add_export_json(m, d.scene, d.exported);
     return m;

@@ -796,6 +796,7 @@ inline std::span<const OptimiseKey> optimise_keys() {
         {"reheat_factor", &field<&S::schedule, &C::reheat_factor>, 1e-6, 1},
         {"patience_fraction", &field<&S::schedule, &C::patience_fraction>, 0, 1},
         {"smooth_iterations", &field<&S::smooth_iterations>, 0, 10000},
+        {"keep_better_start", &field<&S::keep_better_start>},
         {.name = "export_subdivisions", .read = read_export_subdivisions, .write = write_export_subdivisions},
         {"export_tolerance", &field<&S::exports, &ExportOptions::tolerance>, 0.01, 10},
         {"export_max_triangles", &field<&S::exports, &ExportOptions::max_triangles>, 1000, 1'000'000'000},
