@@ -696,6 +696,13 @@ TEST_CASE("finish_design delivers the start where it traces better than the anne
         CHECK(same_bits(d.delivered->start_error, flat_error));
         CHECK(same_bits(d.result.surface.heights(), start.surface.heights()));
     }
+    SUBCASE("nothing annealed (the start used the budget): the annealed surface, traced once") {
+        const CompletedDesign d = finished(start.surface, start.surface, true);
+        REQUIRE(d.delivered);
+        CHECK_FALSE(d.delivered->start);
+        CHECK(same_bits(d.delivered->annealed_error, start_error));
+        CHECK(same_bits(d.delivered->start_error, start_error));
+    }
     SUBCASE("switched off, no start, or a start on another mesh: the annealed surface, not compared") {
         Heightmap coarse = surface_for(plan.scene, 9);
         for (const auto& [begun, keep] : {std::pair{std::optional<Heightmap>(start.surface), false},

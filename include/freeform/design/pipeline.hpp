@@ -253,15 +253,21 @@ inline void finish_surface(const Scene& scene, const DesignOptions& options, Hei
 inline std::optional<CellMeans> deliver_surface(const Scene& scene, const DesignOptions& options,
                                                 DesignResult& result, const ImageD& target,
                                                 std::optional<DeliveredSurface>& delivered) {
-    finish_surface(scene, options, result.surface, result.tool_cut);
     std::optional<Heightmap> start = std::move(result.start_surface);
     result.start_surface.reset();
-    if (!options.keep_better_start || !start || start->nx() != result.surface.nx() ||
-        start->ny() != result.surface.ny())
-        return std::nullopt;
+    const bool compare = options.keep_better_start && start && start->nx() == result.surface.nx() &&
+                         start->ny() == result.surface.ny();
+    // Nothing annealed (a budget the start used up): the two are one surface, traced once.
+    const bool unchanged = compare && start->heights() == result.surface.heights();
+    finish_surface(scene, options, result.surface, result.tool_cut);
+    if (!compare) return std::nullopt;
+    CellMeans annealed = designed_physical_cell_means(scene, options, result.surface, target, options.threads);
+    if (unchanged) {
+        delivered = DeliveredSurface{false, annealed.error, annealed.error};
+        return annealed;
+    }
     double start_cut = 0;
     finish_surface(scene, options, *start, start_cut);
-    CellMeans annealed = designed_physical_cell_means(scene, options, result.surface, target, options.threads);
     CellMeans from_start = designed_physical_cell_means(scene, options, *start, target, options.threads);
     delivered = DeliveredSurface{from_start.error < annealed.error, annealed.error, from_start.error};
     if (!delivered->start) return annealed;
