@@ -56,7 +56,8 @@ struct DesignCallbacks {
     // surface so far is kept and finished like a complete one).
     std::function<bool(const DesignProgress&)> progress;
     // Before each long step that reports no progress of its own: "finding the start" (the
-    // first, once plan_design has accepted the scene), "exporting the surface and tracing
+    // first, once plan_design has accepted the scene), "tracing the annealed surface
+    // against its start" (optimise.keep_better_start), "exporting the surface and tracing
     // the exported mesh".
     std::function<void(const std::string&)> phase;
 };
