@@ -412,14 +412,17 @@ void print_forms(const CompletedDesign& d, const json& m) {
         }
         first = false;
     }
-    if (forms.contains("designed"))
+    if (forms.contains("designed")) {
+        // optimise.keep_better_start: the other surface's figure too.
+        std::string other;
+        if (d.delivered && d.delivered->start)
+            other = ": the start, delivered because the annealed surface traced worse, " +
+                    fixed(d.delivered->annealed_error, 4) + " (optimise.keep_better_start)";
+        else if (d.delivered)
+            other = "; its start " + fixed(d.delivered->start_error, 4);
         std::printf("  the designed surface itself (heightmap.pfm): %s%s\n", form_figure(forms, "designed").c_str(),
-                    !d.delivered ? ""
-                    : d.delivered->start
-                        ? (": the start, delivered because the annealed surface traced worse, " +
-                           fixed(d.delivered->annealed_error, 4) + " (optimise.keep_better_start)")
-                              .c_str()
-                        : ("; its start " + fixed(d.delivered->start_error, 4)).c_str());
+                    other.c_str());
+    }
     if (!fab.tolerance_met)
         std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at k = %d%s; "
                     "surface.step / surface.dat keep the designed surface\n",
@@ -786,8 +789,7 @@ int run_export(const ExportArgs& a) {
                         fc.cells->error, (long long)fc.triangles, fc.cells->rays_per_cell);
     }
     if (target) {
-        const CellMeans designed = designed_cell_means(scene, hm, *target, physical_cell_mean_options(job.options.seed),
-                                                       a.threads);
+        const CellMeans designed = designed_physical_cell_means(scene, job.options, hm, *target, a.threads);
         std::printf("  the designed surface itself (%s): %.4f\n", a.heightmap.string().c_str(), designed.error);
     }
     return 0;

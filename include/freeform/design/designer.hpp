@@ -103,8 +103,8 @@ struct DesignResult {
     std::string device = "cpu";
     // The surface the annealing started from, on the final mesh: finish_design delivers
     // it instead of the annealed one when that traces better (optimise.keep_better_start,
-    // DeliveredSurface in pipeline.hpp). Empty for the start alone, or where the start's
-    // mesh is not the final one.
+    // DeliveredSurface in pipeline.hpp). Empty for the start alone, with keep_better_start
+    // off, or where the start's mesh is not the final one.
     std::optional<Heightmap> start_surface;
     // Where and why the device failed, when it did ("level 2 stage 1: <error>"); the
     // design then went on on the CPU, the same bit for bit. Empty: it did not.
@@ -311,7 +311,7 @@ inline SharedStart prepare_start(const Scene& scene, Heightmap initial, const Im
     } else {
         shared.report.plan = "all planned levels run";
     }
-    shared.final_surface = start.surface;
+    if (options.keep_better_start) shared.final_surface = start.surface;  // finish_design compares with it
     shared.surface = std::move(start.surface);
     const LevelPlan& first = levels[std::size_t(shared.skip)];
     if (start.map && (first.mesh_x != shared.surface.nx() || first.mesh_y != shared.surface.ny())) {

@@ -93,8 +93,9 @@ struct DesignStart {
 // holds values only, no transport map.
 struct SharedStart {
     Heightmap surface;       // on the first level's mesh
-    Heightmap final_surface;  // the start on the mesh it was made on (the final one): the
-                              // maker's alone, not sent to other replicas (replicas.hpp)
+    Heightmap final_surface;  // the start on the mesh it was made on (the final one), when
+                              // optimise.keep_better_start: the maker's alone, not sent to
+                              // other replicas (replicas.hpp)
     StartReport report;      // plan filled in; levels_planned and levels_used are not
     bool transport = false;  // the surface was fitted to a transport map (the annealer refines)
     int skip = 0;            // coarse planned levels skipped
