@@ -62,7 +62,7 @@ TEST_CASE("every deposit keeps a ray's weight exactly, at the edges too") {
     const Fixed w = to_fixed(1.2345);
     for (const Deposit d : {Deposit::nearest, Deposit::bilinear, Deposit::fine_bilinear}) {
         const ReceiverView rv = receiver_view(7, 5, d);
-        for (float x : {0.0f, 0.1f, 0.24f, 0.26f, 0.5f, 0.74f, 0.76f, 3.0f, 3.999f, 6.9f, 6.999f})
+        for (float x : {0.0f, 0.1f, 0.24f, 0.26f, 0.39f, 0.41f, 0.5f, 0.6f, 0.74f, 0.76f, 3.0f, 3.999f, 6.9f, 6.999f})
             for (float y : {0.0f, 0.2f, 2.5f, 2.8f, 4.99f}) {
                 Fixed sum = 0;
                 deposit(rv, x, y, w, [&](std::int64_t c, Fixed a) {
@@ -75,47 +75,111 @@ TEST_CASE("every deposit keeps a ray's weight exactly, at the edges too") {
     }
 }
 
-TEST_CASE("fine_bilinear is bilinear on a grid twice as fine, summed into cells") {
-    // The independent computation: a receiver of twice the resolution with the plain
-    // bilinear deposit, each 2 x 2 block of its cells added up.
-    const int w = 6, h = 4;
-    const ReceiverView coarse = receiver_view(w, h, Deposit::fine_bilinear);
-    const ReceiverView fine = receiver_view(2 * w, 2 * h, Deposit::bilinear);
-    const Fixed weight = to_fixed(1.0);
-    CounterRng rng(7, 0);
-    for (int k = 0; k < 2000; ++k) {
-        const float x = float(rng.uniform() * w), y = float(rng.uniform() * h);
-        const std::vector<Fixed> a = deposit_points(coarse, {{x, y}}, weight);
-        const std::vector<Fixed> fine_cells = deposit_points(fine, {{2 * x, 2 * y}}, weight);
-        for (int cy = 0; cy < h; ++cy)
-            for (int cx = 0; cx < w; ++cx) {
-                Fixed b = 0;
-                for (int dy = 0; dy < 2; ++dy)
-                    for (int dx = 0; dx < 2; ++dx) b += fine_cells[std::size_t(2 * cy + dy) * 2 * w + 2 * cx + dx];
-                // Both round shares to fixed point; they agree to a few units of 2^-32.
-                CHECK(std::abs(a[std::size_t(cy) * w + cx] - b) <= 4);
-            }
+TEST_CASE("fine_bilinear is bilinear on a grid k times finer, summed into cells") {
+    // The independent computation: a receiver k times the resolution with the plain
+    // bilinear deposit, each k x k block of its cells added up. Landing points on a grid of
+    // 1/1024 cell keep k·x exact in float, so both sides see the same point.
+    for (const int k : {fine_deposit_factor, fine_deposit_factor_blurred}) {
+        CAPTURE(k);
+        const int w = 6, h = 4;
+        ReceiverView coarse = receiver_view(w, h, Deposit::fine_bilinear);
+        coarse.fine_factor = float(k);
+        const ReceiverView fine = receiver_view(k * w, k * h, Deposit::bilinear);
+        const Fixed weight = to_fixed(1.0);
+        CounterRng rng(7, 0);
+        for (int n = 0; n < 2000; ++n) {
+            const float x = float(std::floor(rng.uniform() * w * 1024) / 1024);
+            const float y = float(std::floor(rng.uniform() * h * 1024) / 1024);
+            const std::vector<Fixed> a = deposit_points(coarse, {{x, y}}, weight);
+            const std::vector<Fixed> fine_cells = deposit_points(fine, {{float(k) * x, float(k) * y}}, weight);
+            for (int cy = 0; cy < h; ++cy)
+                for (int cx = 0; cx < w; ++cx) {
+                    Fixed b = 0;
+                    for (int dy = 0; dy < k; ++dy)
+                        for (int dx = 0; dx < k; ++dx) b += fine_cells[std::size_t(k * cy + dy) * k * w + k * cx + dx];
+                    // Both round shares to fixed point; they agree to a few units of 2^-32.
+                    CHECK(std::abs(a[std::size_t(cy) * w + cx] - b) <= 4);
+                }
+        }
     }
+}
+
+TEST_CASE("fine_bilinear keeps a ray whole in its cell unless it lands within 1/(2k) of an edge") {
+    const double r = 0.5 / fine_deposit_factor;
+    const ReceiverView rv = receiver_view(8, 8, Deposit::fine_bilinear);
+    CHECK(rv.fine_factor == float(fine_deposit_factor));
+    const Fixed weight = to_fixed(1.0);
+    const auto right_share = [&](float x) {  // the share of cell (4, 4) for a point in row 4
+        return double(deposit_points(rv, {{x, 4.5f}}, weight)[4 * 8 + 4]) / double(weight);
+    };
+    CHECK(right_share(float(3.5)) == 0.0);
+    CHECK(right_share(float(4.0 - 1.01 * r)) == 0.0);
+    CHECK(right_share(4.0f) == doctest::Approx(0.5).epsilon(1e-6));
+    CHECK(right_share(float(4.0 - 0.5 * r)) == doctest::Approx(0.25).epsilon(1e-5));
+    CHECK(right_share(float(4.0 + 1.01 * r)) == 1.0);
+}
+
+TEST_CASE("the wide ramp only where the light source blurs an image point over a cell") {
+    // basic_scene: the receiver 0.5 m from the surface; its cells, and the blur each
+    // source makes there, computed here from the geometry.
+    Scene s = basic_scene(100);
+    const double cell = s.receiver.size.x / s.receiver.width;
+    const auto factor = [&](const LightShape& shape) {
+        s.light.shape = shape;
+        const PathParams pp = make_path_params(s);
+        CHECK(pp.receiver.fine_factor == float(fine_deposit_factor_for(s, s.receiver)));
+        return fine_deposit_factor_for(s, s.receiver);
+    };
+    CHECK(factor(CollimatedLight{}) == fine_deposit_factor);
+    CHECK(factor(PointLight{}) == fine_deposit_factor);
+    // A distant source whose disc smears a point over 0.9 and 1.1 cells at 0.5 m.
+    const auto sun = [&](double cells) {
+        CollimatedLight c;
+        c.angular_radius = std::atan(cells * cell / 0.5) * 180.0 / 3.141592653589793;
+        return c;
+    };
+    CHECK(factor(sun(0.9)) == fine_deposit_factor);
+    CHECK(factor(sun(1.1)) == fine_deposit_factor_blurred);
+    CHECK(source_blur_cells(s, s.receiver) == doctest::Approx(1.1));
+    // A disc 0.3 m from the surface: radius R smears over R · 0.5 / 0.3.
+    DiskLight disk;
+    disk.center = {0, 0, 0.3};
+    disk.radius = 0.5 * cell * 0.3 / 0.5;
+    CHECK(factor(disk) == fine_deposit_factor);
+    disk.radius = 2 * cell * 0.3 / 0.5;
+    CHECK(factor(disk) == fine_deposit_factor_blurred);
+    // A coarser receiver (a design's first level) sees the same blur in fewer cells.
+    s.light.shape = sun(1.5);
+    Receiver coarse = s.receiver;
+    coarse.width = coarse.height = 50;
+    CHECK(source_blur_cells(s, coarse) == doctest::Approx(0.75));
+    CHECK(fine_deposit_factor_for(s, coarse) == fine_deposit_factor);
 }
 
 TEST_CASE("light that alternates from cell to cell: how much of its contrast each deposit keeps") {
     // Light spread evenly inside each cell, twice as much in even columns. A ray's share
     // of its neighbour, averaged over its cell, is what the deposit blurs: bilinear gives
     // 1/8 to each neighbour (a cell keeps 3/4), so it keeps half the alternation
-    // (3/4 − 2 · 1/8); fine_bilinear gives 1/16 (keeps 7/8), three quarters; nearest all.
-    // (At finer scales bilinear's tent loses more: its response is sinc²(f) against the
-    // cell mean's sinc(f), fine_bilinear's sinc(f) · sinc(f/2).)
-    const int w = 24, h = 6;
-    const auto pts = alternating_columns(w, h, 8);
-    const Fixed weight = to_fixed(1.0);
-    const auto error = [&](Deposit d) {
-        return l1_to_uniform_interior(deposit_points(receiver_view(w, h, d), pts, weight), w, h);
-    };
-    // Cell means: columns of 2 and 1 parts, mean 1.5: |0.5| / (2 · 1.5) = 1/6.
-    const double nearest = error(Deposit::nearest);
-    CHECK(nearest == doctest::Approx(1.0 / 6.0).epsilon(1e-6));
-    CHECK(error(Deposit::bilinear) == doctest::Approx(0.5 / 6.0).epsilon(1e-4));
-    CHECK(error(Deposit::fine_bilinear) == doctest::Approx(0.75 / 6.0).epsilon(1e-4));
+    // (3/4 − 2 · 1/8); fine_bilinear's ramp of 1/(2k) either side of an edge gives
+    // 1/(8k) (keeps 1 − 1/(4k)), so 1 − 1/(2k) of the alternation: 9/10 at k = 5, 3/4 at
+    // k = 2; nearest all. (At finer scales bilinear's tent loses more: its response is sinc²(f) against
+    // the cell mean's sinc(f), fine_bilinear's sinc(f) · sinc(f/k).) Points spaced 1/(4k)
+    // of a cell (or half that) sample each ramp at its midpoints, so the sums are exact.
+    for (const int k : {fine_deposit_factor, fine_deposit_factor_blurred}) {
+        CAPTURE(k);
+        const int w = 24, h = 6;
+        const auto pts = alternating_columns(w, h, 4 * k);
+        const Fixed weight = to_fixed(1.0);
+        const auto error = [&](Deposit d) {
+            ReceiverView rv = receiver_view(w, h, d);
+            rv.fine_factor = float(k);
+            return l1_to_uniform_interior(deposit_points(rv, pts, weight), w, h);
+        };
+        // Cell means: columns of 2 and 1 parts, mean 1.5: |0.5| / (2 · 1.5) = 1/6.
+        CHECK(error(Deposit::nearest) == doctest::Approx(1.0 / 6.0).epsilon(1e-6));
+        CHECK(error(Deposit::bilinear) == doctest::Approx(0.5 / 6.0).epsilon(1e-4));
+        CHECK(error(Deposit::fine_bilinear) == doctest::Approx((1.0 - 0.5 / k) / 6.0).epsilon(1e-4));
+    }
 }
 
 TEST_CASE("cell means: the error converges as rays double, and is the nearest-deposit error") {

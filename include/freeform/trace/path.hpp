@@ -69,6 +69,7 @@ struct ReceiverView {
     float inv_cell_u = 1, inv_cell_v = 1;
     int width = 1, height = 1;
     Deposit deposit = Deposit::fine_bilinear;
+    float fine_factor = float(fine_deposit_factor);  // fine_bilinear's k (trace/setup.hpp)
 
     // Continuous pixel coordinates where the ray (o, d) meets the receiver's front.
     FREEFORM_HD bool hit(Vec3 o, Vec3 d, float& px, float& py) const {
@@ -109,11 +110,14 @@ FREEFORM_HD inline Splat splat(const ReceiverView& rv, float px, float py, Fixed
     y0 -= sy < float(y0) ? 1 : 0;
     double fx = double(sx - float(x0)), fy = double(sy - float(y0));
     if (rv.deposit == Deposit::fine_bilinear) {
-        // Bilinear between the centres of a grid twice as fine, summed into cells: the
-        // share of the next cell is 0 up to a quarter cell before the cells' common edge,
-        // 1/2 on it, 1 a quarter cell past it (core/deposit.hpp).
-        fx = fx < 0.25 ? 0.0 : fx > 0.75 ? 1.0 : 2.0 * fx - 0.5;
-        fy = fy < 0.25 ? 0.0 : fy > 0.75 ? 1.0 : 2.0 * fy - 0.5;
+        // Bilinear between the centres of a grid k times finer, summed into cells: the
+        // share of the next cell is 0 up to half a fine cell before the cells' common
+        // edge, 1/2 on it, 1 half a fine cell past it (core/deposit.hpp).
+        const double k = double(rv.fine_factor);
+        fx = k * (fx - 0.5) + 0.5;
+        fy = k * (fy - 0.5) + 0.5;
+        fx = fx < 0.0 ? 0.0 : fx > 1.0 ? 1.0 : fx;
+        fy = fy < 0.0 ? 0.0 : fy > 1.0 ? 1.0 : fy;
     }
     int x1 = x0 + 1, y1 = y0 + 1;
     x0 = x0 < 0 ? 0 : x0;

@@ -1,5 +1,6 @@
 #pragma once
 // Builds the kernel-side parameters of a scene (all in the surface frame).
+#include <cmath>
 #include <variant>
 
 #include "../scene/rays.hpp"
@@ -22,6 +23,31 @@ inline ReceiverView make_receiver_view(const Receiver& r, const Frame& surface_f
     return v;
 }
 
+// How far the light source's own extent smears an image point on the receiver, in cells
+// of `receiver` (the larger of its two cell sides): a distant source of angular radius a
+// smears over D tan a at the receiver's distance D from the surface, a disc of radius R at
+// distance d over R D / d; a point source not at all.
+inline double source_blur_cells(const Scene& scene, const Receiver& receiver) {
+    const double D = length(receiver.frame.origin - scene.surface.frame.origin);
+    double blur = 0;
+    if (const auto* c = std::get_if<CollimatedLight>(&scene.light.shape)) {
+        blur = D * std::tan(degrees_to_radians(c->angular_radius));
+    } else if (const auto* disk = std::get_if<DiskLight>(&scene.light.shape)) {
+        const double d = length(disk->center - scene.surface.frame.origin);
+        blur = d > 0 ? disk->radius * D / d : 0;
+    }
+    const double cell = std::fmax(receiver.size.x / receiver.width, receiver.size.y / receiver.height);
+    return blur / cell;
+}
+
+// fine_bilinear's k for this scene and receiver (core/deposit.hpp): the narrow ramp,
+// unless the source blurs every image point over a cell or more. Then the surface cannot
+// place light finely enough to exploit the wide ramp, and the wide ramp averages more of
+// the rays' noise.
+inline int fine_deposit_factor_for(const Scene& scene, const Receiver& receiver) {
+    return source_blur_cells(scene, receiver) >= 1.0 ? fine_deposit_factor_blurred : fine_deposit_factor;
+}
+
 // A lens body's side walls stand `rim` beyond the face's edges (lens_rim).
 inline MaterialView make_material_view(const Material& m, Vec2d size, double rim = 0) {
     MaterialView v;
@@ -42,6 +68,7 @@ inline PathParams make_path_params(const Scene& scene, const Receiver& receiver)
     PathParams p;
     p.material = make_material_view(scene.surface.material, scene.surface.size, lens_rim(scene));
     p.receiver = make_receiver_view(receiver, scene.surface.frame);
+    p.receiver.fine_factor = float(fine_deposit_factor_for(scene, receiver));
     p.phong_alpha = float(scene.surface.phong_alpha);
     p.max_depth = scene.trace.max_depth;
     p.fresnel = scene.trace.fresnel;
