@@ -135,7 +135,7 @@ TEST_CASE("the wide ramp only where the light source blurs an image point over a
     // A distant source whose disc smears a point over 0.9 and 1.1 cells at 0.5 m.
     const auto sun = [&](double cells) {
         CollimatedLight c;
-        c.angular_radius = std::atan(cells * cell / 0.5) * 180.0 / 3.141592653589793;
+        c.angular_radius = std::atan(cells * cell / 0.5) * 180.0 / pi;
         return c;
     };
     CHECK(factor(sun(0.9)) == fine_deposit_factor);
@@ -162,9 +162,10 @@ TEST_CASE("light that alternates from cell to cell: how much of its contrast eac
     // 1/8 to each neighbour (a cell keeps 3/4), so it keeps half the alternation
     // (3/4 − 2 · 1/8); fine_bilinear's ramp of 1/(2k) either side of an edge gives
     // 1/(8k) (keeps 1 − 1/(4k)), so 1 − 1/(2k) of the alternation: 9/10 at k = 5, 3/4 at
-    // k = 2; nearest all. (At finer scales bilinear's tent loses more: its response is sinc²(f) against
-    // the cell mean's sinc(f), fine_bilinear's sinc(f) · sinc(f/k).) Points spaced 1/(4k)
-    // of a cell (or half that) sample each ramp at its midpoints, so the sums are exact.
+    // k = 2; nearest all. (At finer scales bilinear's tent loses more: its response is
+    // sinc²(f) against the cell mean's sinc(f), fine_bilinear's sinc(f) · sinc(f/k).)
+    // Points spaced 1/(4k) of a cell (or half that) sample each ramp at its midpoints, so
+    // the sums are exact.
     for (const int k : {fine_deposit_factor, fine_deposit_factor_blurred}) {
         CAPTURE(k);
         const int w = 24, h = 6;
