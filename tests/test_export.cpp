@@ -468,6 +468,68 @@ TEST_CASE("lens solid: elliptical aperture, tilted frame, STL round trip") {
         CHECK(length(sheet_back.normals[v] - sheet.normals[v]) < 1e-15);
 }
 
+TEST_CASE("a fractional k: cells of ⌊k⌋ and ⌈k⌉ sub-cells a side, one sheet on the patches, a valid solid") {
+    const int nx = 7, ny = 5;
+    const double k = 2.5;
+    const Heightmap hm = wavy(nx, ny);
+    // 6 cells along u take round(c·2.5) = 0, 3, 5, 8, 10, 13, 15: 15 sub-cells; 4 along v take 10.
+    const std::size_t fx = 16, fy = 11;
+    const TriangleMesh m = tessellate_surface(hm, 0.75f, k, false);
+    CHECK(m.vertices.size() == fx * fy);
+    CHECK(m.triangles.size() == 2u * (fx - 1) * (fy - 1));
+    const MeshCheck c = check_mesh(m);
+    CHECK(c.manifold);
+    CHECK(c.oriented);
+    CHECK_FALSE(c.closed);
+    CHECK(c.degenerate_triangles == 0);
+    CHECK(c.boundary_edges == int(2 * ((fx - 1) + (fy - 1))));
+    for (const auto& t : m.triangles) {
+        const Vec3d n = cross(m.vertices[std::size_t(t[1])] - m.vertices[std::size_t(t[0])],
+                              m.vertices[std::size_t(t[2])] - m.vertices[std::size_t(t[0])]);
+        CHECK(n.z > 0);
+    }
+    // alpha = 0: the surface is the grid's flat triangles. Every vertex lies on them, and
+    // each cell holds 2·kx·ky facets with kx, ky in {2, 3}, both of them somewhere.
+    const TriangleMesh flat = tessellate_surface(hm, 0.0f, 1, false);
+    const TriangleMesh fine = tessellate_surface(hm, 0.0f, k, false);
+    for (const Vec3d& p : fine.vertices) {
+        double w = 0;
+        REQUIRE(mesh_height_at(flat, p.x, p.y, w));
+        CHECK(std::abs(p.z - w) < 1e-12);
+    }
+    std::vector<int> per_cell(std::size_t(nx - 1) * (ny - 1), 0);
+    for (const auto& t : fine.triangles) {
+        Vec3d centre{0, 0, 0};
+        for (std::int32_t v : t) centre = centre + fine.vertices[std::size_t(v)];
+        centre = centre / 3.0;
+        const int ci = std::clamp(int((centre.x + 0.04) / hm.du()), 0, nx - 2);
+        const int cj = std::clamp(int((centre.y + 0.025) / hm.dv()), 0, ny - 2);
+        ++per_cell[std::size_t(cj) * (nx - 1) + std::size_t(ci)];
+    }
+    for (int n : per_cell) CHECK((n == 8 || n == 12 || n == 18));
+    CHECK(std::count(per_cell.begin(), per_cell.end(), 8) > 0);
+    CHECK(std::count(per_cell.begin(), per_cell.end(), 18) > 0);
+    // Lens solids over it, rectangular and elliptical: closed, their volume the prisms'.
+    const Lens lens{1.49, 0.01};
+    for (double kk : {1.5, 2.5, 3.25}) {
+        const TriangleMesh solid = lens_solid(hm, lens, 0.75f, kk, false);
+        const MeshCheck cs = check_mesh(solid);
+        CHECK(cs.watertight());
+        const double prisms = prism_volume(tessellate_surface(hm, 0.75f, kk, false), lens.thickness);
+        CHECK(std::abs(cs.volume - prisms) < 1e-9 * prisms);
+        const Heightmap oval = wavy(12, 9, tilted_frame(), Aperture::ellipse);
+        CHECK(check_mesh(lens_solid(oval, lens, 0.75f, kk)).watertight());
+    }
+    // The facets' normal error at a fractional k lies between the whole levels around it.
+    const double e2 = tessellation_normal_error(hm, 0.75, 2, 0.9), e25 = tessellation_normal_error(hm, 0.75, k, 0.9),
+                 e3 = tessellation_normal_error(hm, 0.75, 3, 0.9);
+    MESSAGE("90th percentile facet normal error: k = 2 ", e2, ", 2.5 ", e25, ", 3 ", e3, " rad");
+    CHECK(e25 <= e2);
+    CHECK(e25 >= e3);
+    CHECK_THROWS_AS(tessellate_surface(hm, 0.75f, 0.9, false), InputError);
+    CHECK_THROWS_AS(tessellate_surface(hm, 0.75f, NAN, false), InputError);
+}
+
 TEST_CASE("export arguments are checked") {
     const Heightmap hm = wavy(5, 4);
     CHECK_THROWS_AS(tessellate_surface(hm, 0.75f, 0), InputError);

@@ -133,6 +133,39 @@ TEST_CASE("the automatic level keeps the exported mesh within its triangle budge
     CHECK(roomy.subdivisions < 16);
 }
 
+TEST_CASE("a budget between whole levels is filled with a fractional k") {
+    Scene s = basic_scene(100);
+    Heightmap curved = surface_for(s, 21);  // 400 cells: k² · 800 triangles
+    shape(curved, [](double u, double v) { return 0.002 * std::sin(140 * u) * std::cos(100 * v); });
+    CHECK(fractional_subdivisions_for_triangles(curved, 20'000, 16) == 5.0);  // a whole level exactly
+    CHECK(sheet_triangles(curved, 5.0) == 20'000);
+    const double below = fractional_subdivisions_for_triangles(curved, 19'999, 16);
+    CHECK(below > 4.9);
+    CHECK(below < 5.0);
+    CHECK(sheet_triangles(curved, below) <= 19'999);
+    CHECK(fractional_subdivisions_for_triangles(curved, 100, 16) == 1.0);  // never below one
+    CHECK(fractional_subdivisions_for_triangles(curved, 1'000'000, 16) == 16.0);  // the cap
+
+    ExportOptions o;
+    o.tolerance = 0.01;  // more than the budget allows
+    o.max_triangles = 26'000;
+    s.surface.phong_alpha = 0.5;
+    const Fabrication f = make_fabrication(s, o, curved);
+    MESSAGE("k = ", f.subdivisions, ", ", f.mesh.triangles.size(), " triangles, normal error ", f.normal_error * 1e3,
+            " mrad");
+    CHECK(f.subdivisions > 5.5);
+    CHECK(f.subdivisions < 6);
+    CHECK(f.mesh.triangles.size() <= 26'000u);
+    CHECK(f.mesh.triangles.size() > 25'000u);
+    CHECK(std::int64_t(f.mesh.triangles.size()) == sheet_triangles(curved, f.subdivisions));
+    CHECK(f.normal_error <= tessellation_normal_error(curved, 0.5, 5, 0.9));
+    CHECK(f.normal_error >= tessellation_normal_error(curved, 0.5, 6, 0.9));
+    CHECK_FALSE(f.tolerance_met);
+    // A fixed export_subdivisions stays whole.
+    o.subdivisions = 3;
+    CHECK(make_fabrication(s, o, curved).subdivisions == 3.0);
+}
+
 #if defined(FREEFORM_WITH_EMBREE)
 
 namespace {

@@ -37,7 +37,7 @@ struct ExportedGeometry {
     std::int64_t smooth_triangles = -1;
 };
 
-inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, int subdivisions) {
+inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, double subdivisions) {
     const float alpha = float(scene.surface.phong_alpha);
     if (const Lens* lens = std::get_if<Lens>(&scene.surface.material))
         return {lens_solid(export_blank(scene, surface), *lens, alpha, subdivisions, false), lens->ior};
@@ -95,7 +95,7 @@ ExportedTrace trace_exported(P policy, const Scene& scene, const ExportedGeometr
 }
 
 template <HostPolicy P>
-ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, int subdivisions,
+ExportedTrace trace_exported(P policy, const Scene& scene, const Heightmap& surface, double subdivisions,
                              const TraceSetup& setup) {
     return trace_exported(policy, scene, exported_geometry(scene, surface, subdivisions), setup);
 }

@@ -80,7 +80,7 @@ inline double facet_normal_tolerance(const Scene& scene, double tolerance_cells)
 
 struct Fabrication {
     TriangleMesh mesh;          // world frame: the sheet (mirror) or the solid (lens)
-    int subdivisions = 1;       // k: k² facet pairs per grid cell
+    double subdivisions = 1;    // k: about k² facet pairs per grid cell (fractional: fills the budget)
     bool automatic = true;      // k chosen from the tolerance (export_subdivisions "auto")
     double normal_error = 0;    // tessellation_normal_error at k (90 % of facets), radians
     double normal_tolerance = 0;  // δ_max, radians
@@ -116,6 +116,36 @@ inline int subdivisions_for_triangles(const Heightmap& surface, std::int64_t max
     return std::max(1, int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))));
 }
 
+// The triangles of the sheet with s facet pairs a cell side (detail::fine_grid).
+inline std::int64_t sheet_triangles(const Heightmap& surface, double s) {
+    const detail::FineGrid g = detail::fine_grid(surface, s);
+    std::int64_t t = 0;
+    for (int cj = 0; cj + 1 < surface.ny(); ++cj)
+        for (int ci = 0; ci + 1 < surface.nx(); ++ci)
+            if (surface.cell_active(ci, cj)) t += 2 * std::int64_t(g.kx(ci)) * g.ky(cj);
+    return t;
+}
+
+// The largest fractional k (to a thousandth, at most max_k) whose sheet stays within
+// `max_triangles`, or 1 where even that does not.
+//
+// Why fractional: the budget rarely falls on a whole k. On the 401² mesh of a 200²
+// receiver 2 million triangles allow k = 2.5 where the whole k = 2 uses 1.28 million,
+// and on 513² (512²) they allow 1.95 where k = 1 uses a quarter of them. Flat facets
+// lose about as 1/k² (docs/export.md, "The facets"), so the mixed k buys about what a
+// whole k would: measured on the letter E's demo design (401²), k = 2 0.0185, k = 3 0.0163
+// (2.9 million triangles), k = 2.5 within the budget; on the 512² photograph k = 1 0.115,
+// k = 2 0.061 (2.1 million), k = 1.95 within it.
+inline double fractional_subdivisions_for_triangles(const Heightmap& surface, std::int64_t max_triangles,
+                                                    double max_k) {
+    const std::int64_t cells = active_cell_count(surface);
+    if (cells == 0) return 1;
+    double s = std::min(max_k, std::floor(1000 * std::sqrt(double(max_triangles) / (2.0 * double(cells)))) / 1000);
+    // Rounding the fine lines can add a line per axis: step down until the count fits.
+    while (s > 1 && sheet_triangles(surface, s) > max_triangles) s = std::max(1.0, s - 0.001);
+    return std::max(1.0, s);
+}
+
 inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& options, const Heightmap& surface) {
     Fabrication f;
     const double alpha = scene.surface.phong_alpha;
@@ -127,6 +157,15 @@ inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& opt
         const SubdivisionChoice c = subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_k);
         f.subdivisions = c.k;
         f.normal_error = c.normal_error;
+        // The budget stopped k short of the tolerance: fill it with a fractional k.
+        if (c.normal_error > f.normal_tolerance && c.k == max_k) {
+            const double s = fractional_subdivisions_for_triangles(surface, options.max_triangles,
+                                                                    double(max_auto_subdivisions));
+            if (s > double(c.k)) {
+                f.subdivisions = s;
+                f.normal_error = tessellation_normal_error(surface, alpha, s, 0.9);
+            }
+        }
     } else {
         f.subdivisions = options.subdivisions;
         f.normal_error = tessellation_normal_error(surface, alpha, f.subdivisions, 0.9);

@@ -5,7 +5,9 @@
 // study's result files, so both read alike.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -135,7 +137,9 @@ inline nlohmann::json fabrication_json(const MachiningReport& r, double tool_rad
 // energy_physical, cell_means, export and fabrication.
 inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportChecks& c) {
     nlohmann::json exported;
-    exported["subdivisions"] = c.fabrication.subdivisions;
+    // k: whole, or fractional where it fills the triangle budget (design/fabrication.hpp).
+    const double k = c.fabrication.subdivisions;
+    exported["subdivisions"] = k == std::floor(k) ? nlohmann::json(std::int64_t(k)) : nlohmann::json(k);
     exported["subdivisions_chosen"] =
         c.fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
     exported["facet_normal_error_mrad"] = c.fabrication.normal_error * 1e3;

@@ -82,36 +82,79 @@ inline PhongVertex phong_vertex_in_cell(const Heightmap& hm, int ci, int cj, dou
     return phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
 }
 
-// How far the flat facets of a k-fold tessellation are from the curved patches they
-// stand for: per sub-triangle, the largest angle (radians) between its facet normal and
-// the patch normal at its three corners and its centroid. `quantile` in [0, 1] picks
-// which sub-triangle's angle is reported (1: the worst).
-inline double tessellation_normal_error(const Heightmap& hm, double alpha, int k, double quantile = 1.0) {
+namespace detail {
+
+// The fine grid of a tessellation with s ≥ 1 facet pairs a cell side: cell c of the
+// height map spans fine lines x[c] .. x[c + 1] along u (y likewise along v), with
+// x[c] = round(c·s). An integer s = k splits every cell k × k (x[c] = c·k); between
+// integers the cells get ⌊s⌋ or ⌈s⌉ sub-cells a side, spread evenly, so a triangle budget
+// is filled rather than left at the integer below it (docs/export.md, "The facets").
+// The grid stays one tensor-product grid: neighbouring cells share their fine lines, and
+// no stitching is needed.
+struct FineGrid {
+    std::vector<int> x, y;            // the fine line where each cell starts; nx and ny entries
+    std::vector<int> cell_x, cell_y;  // per fine line: the cell from it up (the last cell at the far end)
+    int fx() const { return x.back() + 1; }
+    int fy() const { return y.back() + 1; }
+    int kx(int ci) const { return x[std::size_t(ci) + 1] - x[std::size_t(ci)]; }
+    int ky(int cj) const { return y[std::size_t(cj) + 1] - y[std::size_t(cj)]; }
+};
+
+inline void fine_lines(int n, double s, std::vector<int>& start, std::vector<int>& cell) {
+    start.resize(std::size_t(n));
+    for (int c = 0; c < n; ++c) start[std::size_t(c)] = int(std::llround(double(c) * s));
+    cell.resize(std::size_t(start.back()) + 1);
+    for (int c = 0; c + 1 < n; ++c)
+        for (int f = start[std::size_t(c)]; f < start[std::size_t(c) + 1]; ++f) cell[std::size_t(f)] = c;
+    cell.back() = n - 2;
+}
+
+inline FineGrid fine_grid(const Heightmap& hm, double s) {
+    FineGrid g;
+    fine_lines(hm.nx(), s, g.x, g.cell_x);
+    fine_lines(hm.ny(), s, g.y, g.cell_y);
+    return g;
+}
+
+}  // namespace detail
+
+// How far the flat facets of a tessellation with s facet pairs a cell side (detail::
+// fine_grid; an integer s is the k-fold one) are from the curved patches they stand for:
+// per sub-triangle, the largest angle (radians) between its facet normal and the patch
+// normal at its three corners and its centroid. `quantile` in [0, 1] picks which
+// sub-triangle's angle is reported (1: the worst).
+inline double tessellation_normal_error(const Heightmap& hm, double alpha, double s, double quantile = 1.0) {
     const int nx = hm.nx(), ny = hm.ny();
+    const detail::FineGrid g = detail::fine_grid(hm, s);
     std::vector<float> angles;
-    angles.reserve(std::size_t(nx - 1) * (ny - 1) * 2 * k * k);
+    angles.reserve(std::size_t(g.fx() - 1) * std::size_t(g.fy() - 1) * 2);
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
             if (!hm.cell_active(ci, cj)) continue;
             const std::int32_t base = 2 * (cj * (nx - 1) + ci);
-            for (int r = 0; r < k; ++r)
-                for (int s = 0; s < k; ++s)
+            const int kx = g.kx(ci), ky = g.ky(cj);
+            for (int r = 0; r < ky; ++r)
+                for (int q = 0; q < kx; ++q)
                     for (int half = 0; half < 2; ++half) {
-                        // Cell-local corners of sub-triangle `half` of sub-cell (s, r), and
-                        // the flat triangle it lies on (the sub-cell's diagonal is the
-                        // cell's direction: off the diagonal both halves share one).
-                        const double a0 = double(s) / k, b0 = double(r) / k, a1 = double(s + 1) / k,
-                                     b1 = double(r + 1) / k;
+                        // Cell-local corners of sub-triangle `half` of sub-cell (q, r). With
+                        // kx = ky the sub-cell's diagonal runs as the cell's, so each
+                        // sub-triangle lies on one flat triangle (its centroid's), and its
+                        // corners are points of that triangle's patch; otherwise a corner
+                        // across the cell's diagonal is taken from its own triangle.
+                        const double a0 = double(q) / kx, b0 = double(r) / ky, a1 = double(q + 1) / kx,
+                                     b1 = double(r + 1) / ky;
                         const double ca[3] = {a0, a1, half == 0 ? a1 : a0};
                         const double cb[3] = {b0, half == 0 ? b0 : b1, b1};
-                        const int parent = s > r ? 0 : s < r ? 1 : half;
+                        const double ac = (ca[0] + ca[1] + ca[2]) / 3.0, bc = (cb[0] + cb[1] + cb[2]) / 3.0;
+                        const int parent = ac >= bc ? 0 : 1;
                         const auto at = [&](double a, double b) {
+                            if (a != b && (a > b ? 0 : 1) != parent) return phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
                             return parent == 0 ? phong_vertex(hm, base, 1.0 - a, a - b, b, alpha)
                                                : phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
                         };
                         PhongVertex v[4];
                         for (int m = 0; m < 3; ++m) v[m] = at(ca[m], cb[m]);
-                        v[3] = at((ca[0] + ca[1] + ca[2]) / 3.0, (cb[0] + cb[1] + cb[2]) / 3.0);
+                        v[3] = at(ac, bc);
                         const Vec3d f = normalize(cross(v[1].position - v[0].position, v[2].position - v[0].position));
                         double worst = 0;
                         for (const PhongVertex& pv : v)
@@ -120,9 +163,9 @@ inline double tessellation_normal_error(const Heightmap& hm, double alpha, int k
                     }
         }
     if (angles.empty()) return 0.0;
-    const auto q = std::size_t(std::clamp(quantile, 0.0, 1.0) * double(angles.size() - 1) + 0.5);
-    std::nth_element(angles.begin(), angles.begin() + std::ptrdiff_t(q), angles.end());
-    return double(angles[q]);
+    const auto qi = std::size_t(std::clamp(quantile, 0.0, 1.0) * double(angles.size() - 1) + 0.5);
+    std::nth_element(angles.begin(), angles.begin() + std::ptrdiff_t(qi), angles.end());
+    return double(angles[qi]);
 }
 
 // The subdivision level the exported facets need: the smallest k in [1, max_k] whose
@@ -158,11 +201,11 @@ inline std::int64_t active_cell_count(const Heightmap& hm) {
 
 namespace detail {
 
-inline void check_export_args(const Heightmap& hm, double phong_alpha, int subdivisions) {
+inline void check_export_args(const Heightmap& hm, double phong_alpha, double subdivisions) {
     if (hm.nx() < 2 || hm.ny() < 2) throw InputError("cannot export an empty height map");
     if (!std::isfinite(phong_alpha))
         throw InputError("export: phong_alpha must be a finite number, got " + std::to_string(phong_alpha));
-    if (subdivisions < 1)
+    if (!(subdivisions >= 1) || !std::isfinite(subdivisions))
         throw InputError("export: subdivisions must be at least 1, got " + std::to_string(subdivisions));
     const double fine = (double(hm.nx() - 1) * subdivisions + 1) * (double(hm.ny() - 1) * subdivisions + 1);
     // Two triangles per sub-cell, plus the lens solid's back face and walls: stay well
@@ -172,23 +215,25 @@ inline void check_export_args(const Heightmap& hm, double phong_alpha, int subdi
                          " x " + std::to_string(hm.ny()) + " grid gives too many vertices for one mesh");
 }
 
-// The tessellated sheet in the surface frame. `fine_index` receives, per fine-grid
-// vertex (row-major, ((nx-1)k+1) columns), its index in the mesh or -1 when no active
-// cell uses it. `point(ci, cj, a, b)` gives the surface point (a PhongVertex) at
+// The tessellated sheet in the surface frame, on fine grid `g` (fine_grid). `fine_index`
+// receives, per fine-grid vertex (row-major, g.fx() columns), its index in the mesh or -1
+// when no active cell uses it. `point(ci, cj, a, b)` gives the surface point (a PhongVertex) at
 // cell-local (a, b) of cell (ci, cj): the Phong patches for the milled mesh, another
 // smooth form of the design (a fitted spline) for judging it. Each fine vertex is
 // computed once, from one of the cells that share it.
 template <class PointFn>
-TriangleMesh tessellate_local(const Heightmap& hm, int k, std::vector<std::int32_t>& fine_index, PointFn&& point) {
+TriangleMesh tessellate_local(const Heightmap& hm, const FineGrid& g, std::vector<std::int32_t>& fine_index,
+                              PointFn&& point) {
     const int nx = hm.nx(), ny = hm.ny();
-    const int fx = (nx - 1) * k + 1, fy = (ny - 1) * k + 1;
-    fine_index.assign(std::size_t(fx) * fy, -1);
+    const int fx = g.fx(), fy = g.fy();
+    fine_index.assign(std::size_t(fx) * std::size_t(fy), -1);
     // A fine vertex is kept when one of the (up to four) cells around it is active.
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
             if (!hm.cell_active(ci, cj)) continue;
-            for (int r = 0; r <= k; ++r)
-                for (int s = 0; s <= k; ++s) fine_index[std::size_t(cj * k + r) * fx + (ci * k + s)] = 0;
+            for (int J = g.y[std::size_t(cj)]; J <= g.y[std::size_t(cj) + 1]; ++J)
+                for (int I = g.x[std::size_t(ci)]; I <= g.x[std::size_t(ci) + 1]; ++I)
+                    fine_index[std::size_t(J) * std::size_t(fx) + std::size_t(I)] = 0;
         }
     TriangleMesh mesh;
     std::int32_t next = 0;
@@ -199,8 +244,8 @@ TriangleMesh tessellate_local(const Heightmap& hm, int k, std::vector<std::int32
             idx = next++;
             // Any cell containing the point gives the same position (see the header); take
             // the one to its upper right, the last one at the far borders.
-            const int ci = std::min(I / k, nx - 2), cj = std::min(J / k, ny - 2);
-            const double a = double(I - ci * k) / k, b = double(J - cj * k) / k;
+            const int ci = g.cell_x[std::size_t(I)], cj = g.cell_y[std::size_t(J)];
+            const double a = double(I - g.x[std::size_t(ci)]) / g.kx(ci), b = double(J - g.y[std::size_t(cj)]) / g.ky(cj);
             const PhongVertex pv = point(ci, cj, a, b);
             mesh.vertices.push_back(pv.position);
             mesh.normals.push_back(pv.normal);
@@ -209,7 +254,7 @@ TriangleMesh tessellate_local(const Heightmap& hm, int k, std::vector<std::int32
     // of the mesh is triangle t of the tracer.
     for (int J = 0; J + 1 < fy; ++J)
         for (int I = 0; I + 1 < fx; ++I) {
-            if (!hm.cell_active(I / k, J / k)) continue;
+            if (!hm.cell_active(g.cell_x[std::size_t(I)], g.cell_y[std::size_t(J)])) continue;
             const auto at = [&](int i, int j) { return fine_index[std::size_t(j) * fx + i]; };
             const std::int32_t v00 = at(I, J), v10 = at(I + 1, J), v11 = at(I + 1, J + 1), v01 = at(I, J + 1);
             mesh.triangles.push_back({v00, v10, v11});
@@ -218,9 +263,10 @@ TriangleMesh tessellate_local(const Heightmap& hm, int k, std::vector<std::int32
     return mesh;
 }
 
-inline TriangleMesh tessellate_local(const Heightmap& hm, double alpha, int k, std::vector<std::int32_t>& fine_index) {
-    return tessellate_local(hm, k, fine_index,
-                            [&](int ci, int cj, double a, double b) { return phong_vertex_in_cell(hm, ci, cj, a, b, alpha); });
+// The same with s facet pairs a cell side.
+template <class PointFn>
+TriangleMesh tessellate_local(const Heightmap& hm, double s, std::vector<std::int32_t>& fine_index, PointFn&& point) {
+    return tessellate_local(hm, fine_grid(hm, s), fine_index, point);
 }
 
 inline void to_world(const Frame& f, TriangleMesh& mesh) {
@@ -239,23 +285,25 @@ inline void check_lens_clearance(double t, const TriangleMesh& mesh, std::size_t
 }
 
 // Adds the side walls and the back face of lens_solid_of to its front, one cell at a
-// time. `fine_index` maps the front's fine grid (fx points a row, k sub-cells a cell
-// side) to its vertices, as tessellate_local left it.
+// time. `fine_index` maps the front's fine grid `g` to its vertices, as tessellate_local
+// left it.
 class LensClosure {
 public:
-    LensClosure(TriangleMesh& mesh, const std::vector<std::int32_t>& fine_index, int fx, int k, double t,
+    LensClosure(TriangleMesh& mesh, const std::vector<std::int32_t>& fine_index, const FineGrid& g, double t,
                 bool front_normals)
-        : mesh_(mesh), fine_index_(fine_index), fx_(fx), k_(k), t_(t), front_normals_(front_normals),
+        : mesh_(mesh), fine_index_(fine_index), g_(g), t_(t), front_normals_(front_normals),
           back_of_(mesh.vertices.size(), -1) {}
 
     // Closes cell (ci, cj); open_side[s] tells whether side s (bottom, right, top,
     // left) is on the outline, the cell across it missing.
     void close_cell(int ci, int cj, const bool (&open_side)[4]) {
-        const int k = k_;
-        const int I0 = ci * k, J0 = cj * k;
-        // Corner start points and unit steps of the four sides: bottom, right, top, left.
-        const int start[4][2] = {{I0, J0}, {I0 + k, J0}, {I0 + k, J0 + k}, {I0, J0 + k}};
+        const int I0 = g_.x[std::size_t(ci)], J0 = g_.y[std::size_t(cj)];
+        const int I1 = g_.x[std::size_t(ci) + 1], J1 = g_.y[std::size_t(cj) + 1];
+        // Corner start points, unit steps and sub-cell counts of the four sides: bottom,
+        // right, top, left.
+        const int start[4][2] = {{I0, J0}, {I1, J0}, {I1, J1}, {I0, J1}};
         const int step[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+        const int count[4] = {I1 - I0, J1 - J0, I1 - I0, J1 - J0};
         ring_.clear();
         bool any_open = false;
         for (int s = 0; s < 4; ++s) {
@@ -264,7 +312,7 @@ public:
                 continue;
             }
             any_open = true;
-            for (int m = 0; m < k; ++m) {
+            for (int m = 0; m < count[s]; ++m) {
                 const std::int32_t a = fine(start[s][0] + m * step[s][0], start[s][1] + m * step[s][1]);
                 const std::int32_t b = fine(start[s][0] + (m + 1) * step[s][0], start[s][1] + (m + 1) * step[s][1]);
                 ring_.push_back(a);
@@ -291,7 +339,9 @@ public:
     }
 
 private:
-    std::int32_t fine(int I, int J) const { return fine_index_[std::size_t(J) * fx_ + I]; }
+    std::int32_t fine(int I, int J) const {
+        return fine_index_[std::size_t(J) * std::size_t(g_.fx()) + std::size_t(I)];
+    }
 
     // Back vertices are created on demand, one per front vertex that needs one.
     std::int32_t back(std::int32_t front) {
@@ -307,7 +357,7 @@ private:
 
     TriangleMesh& mesh_;
     const std::vector<std::int32_t>& fine_index_;
-    int fx_, k_;
+    const FineGrid& g_;
     double t_;
     bool front_normals_;
     std::vector<std::int32_t> back_of_;  // per front vertex; -1 until it has one
@@ -317,16 +367,20 @@ private:
 }  // namespace detail
 
 // The Phong-tessellated fabrication surface (an open sheet): ((nx-1)k+1) × ((ny-1)k+1)
-// shared vertices, 2k² triangles per active cell, counter-clockwise seen from +w (face
+// shared vertices, 2k² triangles per active cell (k = subdivisions; a fractional one
+// mixes ⌊k⌋ and ⌈k⌉ sub-cells a side, detail::fine_grid), counter-clockwise seen from +w (face
 // normals on the light side), per-vertex shading normals. Cells outside an elliptical
 // aperture are left out, and so are the vertices only they use. Coordinates are in the
 // world frame (Heightmap::frame()) unless world_frame is false.
 // Throws InputError for subdivisions < 1, a non-finite alpha or an oversized mesh.
-inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, int subdivisions,
+inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, double subdivisions,
                                        bool world_frame = true) {
     detail::check_export_args(hm, phong_alpha, subdivisions);
     std::vector<std::int32_t> fine_index;
-    TriangleMesh mesh = detail::tessellate_local(hm, double(phong_alpha), subdivisions, fine_index);
+    const double alpha = double(phong_alpha);
+    TriangleMesh mesh = detail::tessellate_local(hm, subdivisions, fine_index, [&](int ci, int cj, double a, double b) {
+        return phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
+    });
     if (world_frame) detail::to_world(hm.frame(), mesh);
     return mesh;
 }
@@ -354,32 +408,31 @@ inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, i
 // detail::tessellate_local); lens_solid below is it over the Phong patches. With
 // `front_normals` the front keeps its vertex normals (the other vertices get the back
 // face's, −w), for tracing the front as a smooth surface (design/exported.hpp); the
-// front's 2k² triangles per active cell come first in the mesh either way.
+// front's triangles (2k² per active cell for an integer k) come first in the mesh either way.
 template <class PointFn>
-TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, int subdivisions, PointFn&& point,
+TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivisions, PointFn&& point,
                            bool front_normals, bool world_frame) {
     detail::check_export_args(hm, 0.0, subdivisions);
     const double t = lens.thickness;
     if (!(t > 0) || !std::isfinite(t))
         throw InputError("lens thickness must be a positive finite number, got " + std::to_string(t));
-    const int k = subdivisions;
     const int nx = hm.nx(), ny = hm.ny();
-    const int fx = (nx - 1) * k + 1;
+    const detail::FineGrid g = detail::fine_grid(hm, subdivisions);
     std::vector<std::int32_t> fine_index;
-    TriangleMesh mesh = detail::tessellate_local(hm, k, fine_index, point);
+    TriangleMesh mesh = detail::tessellate_local(hm, g, fine_index, point);
     if (!front_normals) mesh.normals.clear();
     detail::check_lens_clearance(t, mesh, mesh.vertices.size());
 
     const auto active = [&](int ci, int cj) {
         return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
     };
-    detail::LensClosure closure(mesh, fine_index, fx, k, t, front_normals);
+    detail::LensClosure closure(mesh, fine_index, g, t, front_normals);
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
             if (!active(ci, cj)) continue;
             // A side is on the outline when the cell across it is missing; there the front
-            // has k boundary edges, each getting a wall quad, and the back face takes all
-            // k + 1 points. The front runs counter-clockwise around the region, so its
+            // has that side's sub-cell count of boundary edges, each getting a wall quad, and
+            // the back face takes all their points. The front runs counter-clockwise around the region, so its
             // boundary edges follow the ring's direction.
             const bool open_side[4] = {!active(ci, cj - 1), !active(ci + 1, cj), !active(ci, cj + 1),
                                        !active(ci - 1, cj)};
@@ -390,7 +443,7 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, int subdivisio
 }
 
 // The solid over the Phong patches: what is milled or printed (see lens_solid_of above).
-inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, int subdivisions,
+inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, double subdivisions,
                                bool world_frame = true) {
     detail::check_export_args(hm, phong_alpha, subdivisions);
     const double alpha = double(phong_alpha);
