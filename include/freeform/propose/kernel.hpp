@@ -25,6 +25,7 @@
 
 #include "../core/error.hpp"
 #include "../core/hd.hpp"
+#include "../core/math.hpp"
 #include "../surface/heightmap.hpp"
 #include "../surface/overlay.hpp"
 
@@ -105,7 +106,6 @@ public:
         const double sx = shape.sigma_x, sy = shape.sigma_y, rho = shape.rho;
         const double k = 1.0 / (1.0 - rho * rho);
         const double a = k / (sx * sx), b = -k * rho / (sx * sy), c = k / (sy * sy);
-        const double pi = 3.14159265358979323846;
         const auto window = [&](int d) {
             if (edge_ == KernelEdge::truncate) return 1.0;
             const double t = std::cos(pi * d / (2.0 * (r_ + 1)));

@@ -560,8 +560,8 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
         const double w = double(rays.weight[std::size_t(k)]);
         total += w;
         const Vec3d s = o + d * (-o.z / d.z);
-        double tu = 0, tv = 0;
-        if (strips.any() && strips.depth(s, tu, tv)) {
+        double depth_u = 0, depth_v = 0;
+        if (strips.any() && strips.depth(s, depth_u, depth_v)) {
             // A strip ray: its mirrored light is placed, not transported.
             transport_detail::place_strip_ray(placed, g, optics, strips, s, spacing, w);
             continue;
