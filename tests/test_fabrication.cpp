@@ -155,6 +155,7 @@ TEST_CASE("a budget between whole levels is filled with a fractional k") {
             " mrad");
     CHECK(f.subdivisions > 5.5);
     CHECK(f.subdivisions < 6);
+    CHECK_FALSE(f.whole());
     CHECK(f.mesh.triangles.size() <= 26'000u);
     CHECK(f.mesh.triangles.size() > 25'000u);
     CHECK(std::int64_t(f.mesh.triangles.size()) == sheet_triangles(curved, f.subdivisions));
@@ -163,7 +164,9 @@ TEST_CASE("a budget between whole levels is filled with a fractional k") {
     CHECK_FALSE(f.tolerance_met);
     // A fixed export_subdivisions stays whole.
     o.subdivisions = 3;
-    CHECK(make_fabrication(s, o, curved).subdivisions == 3.0);
+    const Fabrication fixed = make_fabrication(s, o, curved);
+    CHECK(fixed.subdivisions == 3.0);
+    CHECK(fixed.whole());
 }
 
 #if defined(FREEFORM_WITH_EMBREE)

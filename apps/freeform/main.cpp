@@ -106,8 +106,8 @@ std::string fixed(double v, int digits) {
 
 // The exported facets' k: "2", or "2.47" where a fractional k fills the triangle budget
 // (design/fabrication.hpp).
-std::string subdivisions_text(double k) {
-    return k == std::floor(k) ? std::to_string(int(k)) : fixed(k, 2);
+std::string subdivisions_text(const Fabrication& fab) {
+    return fab.whole() ? std::to_string(int(fab.subdivisions)) : fixed(fab.subdivisions, 2);
 }
 
 // --material: "refractive:IOR" makes --mesh a closed solid of that index (the whole
@@ -430,9 +430,9 @@ void print_forms(const CompletedDesign& d, const json& m) {
                     other.c_str());
     }
     if (!fab.tolerance_met)
-        std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at k = %s%s; "
-                    "surface.step / surface.dat keep the designed surface\n",
-                    fab.normal_error * 1e3, fab.normal_tolerance * 1e3, subdivisions_text(fab.subdivisions).c_str(),
+        std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at "
+                    "k = %s%s; surface.step / surface.dat keep the designed surface\n",
+                    fab.normal_error * 1e3, fab.normal_tolerance * 1e3, subdivisions_text(fab).c_str(),
                     fab.automatic ? (" (optimise.export_max_triangles = " +
                                      std::to_string(d.options.exports.max_triangles) + " allows no more)")
                                         .c_str()
@@ -738,11 +738,11 @@ void export_mesh(const ExportArgs& a, ExportFile kind, const DesignJob& job, con
         io::write_stl(a.out, fab.mesh);
     else
         io::write_obj(a.out, fab.mesh);
-    const std::string k = subdivisions_text(fab.subdivisions);
+    const std::string k = subdivisions_text(fab);
     std::printf("wrote %s: %zu triangles, %s x %s facet pairs per cell%s, facet normal error %.3f mrad (90th "
                 "percentile) against a tolerance of %.3f mrad%s\n",
                 a.out.string().c_str(), fab.mesh.triangles.size(), k.c_str(), k.c_str(),
-                fab.subdivisions == std::floor(fab.subdivisions) ? "" : " on average",
+                fab.whole() ? "" : " on average",
                 fab.normal_error * 1e3, fab.normal_tolerance * 1e3,
                 fab.tolerance_met ? "" : ": MISSED within optimise.export_max_triangles");
 #if defined(FREEFORM_WITH_EMBREE)

@@ -87,6 +87,9 @@ struct Fabrication {
     // normal_error <= normal_tolerance. False when the triangle budget (or the cap of 16)
     // stopped k short: the summary and metrics.json say so (docs/export.md).
     bool tolerance_met = false;
+
+    // Whether k is a whole number (every cell k × k) or a fraction that fills the budget.
+    bool whole() const { return subdivisions == std::floor(subdivisions); }
 };
 
 // Upper bound of the "auto" level. The level is also held to the scene's

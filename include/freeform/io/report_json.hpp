@@ -5,7 +5,6 @@
 // study's result files, so both read alike.
 #pragma once
 
-#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <sstream>
@@ -139,7 +138,7 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
     nlohmann::json exported;
     // k: whole, or fractional where it fills the triangle budget (design/fabrication.hpp).
     const double k = c.fabrication.subdivisions;
-    exported["subdivisions"] = k == std::floor(k) ? nlohmann::json(std::int64_t(k)) : nlohmann::json(k);
+    exported["subdivisions"] = c.fabrication.whole() ? nlohmann::json(std::int64_t(k)) : nlohmann::json(k);
     exported["subdivisions_chosen"] =
         c.fabrication.automatic ? "auto (export_tolerance, export_max_triangles)" : "export_subdivisions";
     exported["facet_normal_error_mrad"] = c.fabrication.normal_error * 1e3;

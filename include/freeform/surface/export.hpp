@@ -148,7 +148,8 @@ inline double tessellation_normal_error(const Heightmap& hm, double alpha, doubl
                         const double ac = (ca[0] + ca[1] + ca[2]) / 3.0, bc = (cb[0] + cb[1] + cb[2]) / 3.0;
                         const int parent = ac >= bc ? 0 : 1;
                         const auto at = [&](double a, double b) {
-                            if (a != b && (a > b ? 0 : 1) != parent) return phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
+                            if (a != b && (a > b ? 0 : 1) != parent)
+                                return phong_vertex_in_cell(hm, ci, cj, a, b, alpha);
                             return parent == 0 ? phong_vertex(hm, base, 1.0 - a, a - b, b, alpha)
                                                : phong_vertex(hm, base + 1, 1.0 - b, a, b - a, alpha);
                         };
@@ -245,7 +246,8 @@ TriangleMesh tessellate_local(const Heightmap& hm, const FineGrid& g, std::vecto
             // Any cell containing the point gives the same position (see the header); take
             // the one to its upper right, the last one at the far borders.
             const int ci = g.cell_x[std::size_t(I)], cj = g.cell_y[std::size_t(J)];
-            const double a = double(I - g.x[std::size_t(ci)]) / g.kx(ci), b = double(J - g.y[std::size_t(cj)]) / g.ky(cj);
+            const double a = double(I - g.x[std::size_t(ci)]) / g.kx(ci);
+            const double b = double(J - g.y[std::size_t(cj)]) / g.ky(cj);
             const PhongVertex pv = point(ci, cj, a, b);
             mesh.vertices.push_back(pv.position);
             mesh.normals.push_back(pv.normal);
@@ -368,8 +370,8 @@ private:
 
 // The Phong-tessellated fabrication surface (an open sheet): ((nx-1)k+1) × ((ny-1)k+1)
 // shared vertices, 2k² triangles per active cell (k = subdivisions; a fractional one
-// mixes ⌊k⌋ and ⌈k⌉ sub-cells a side, detail::fine_grid), counter-clockwise seen from +w (face
-// normals on the light side), per-vertex shading normals. Cells outside an elliptical
+// mixes ⌊k⌋ and ⌈k⌉ sub-cells a side, detail::fine_grid), counter-clockwise seen from +w
+// (face normals on the light side), per-vertex shading normals. Cells outside an elliptical
 // aperture are left out, and so are the vertices only they use. Coordinates are in the
 // world frame (Heightmap::frame()) unless world_frame is false.
 // Throws InputError for subdivisions < 1, a non-finite alpha or an oversized mesh.
@@ -408,7 +410,8 @@ inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, d
 // detail::tessellate_local); lens_solid below is it over the Phong patches. With
 // `front_normals` the front keeps its vertex normals (the other vertices get the back
 // face's, −w), for tracing the front as a smooth surface (design/exported.hpp); the
-// front's triangles (2k² per active cell for an integer k) come first in the mesh either way.
+// front's triangles (2k² per active cell for a whole k) come first in the mesh either
+// way.
 template <class PointFn>
 TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivisions, PointFn&& point,
                            bool front_normals, bool world_frame) {
@@ -431,9 +434,9 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivi
         for (int ci = 0; ci + 1 < nx; ++ci) {
             if (!active(ci, cj)) continue;
             // A side is on the outline when the cell across it is missing; there the front
-            // has that side's sub-cell count of boundary edges, each getting a wall quad, and
-            // the back face takes all their points. The front runs counter-clockwise around the region, so its
-            // boundary edges follow the ring's direction.
+            // has that side's sub-cell count of boundary edges, each getting a wall quad,
+            // and the back face takes all their points. The front runs counter-clockwise
+            // around the region, so its boundary edges follow the ring's direction.
             const bool open_side[4] = {!active(ci, cj - 1), !active(ci + 1, cj), !active(ci, cj + 1),
                                        !active(ci - 1, cj)};
             closure.close_cell(ci, cj, open_side);
