@@ -483,6 +483,12 @@ elseif(GROUP STREQUAL "design")
     expect_device_design(device-auto "^(cpu|cuda \\(.*\\))$")
   endif()
 
+  # --heightmap relative to the working directory, the scene in another folder.
+  run(render-relative render "${DATA}/design-tiny.json" --heightmap design1/heightmap.pfm --out rerender-relative)
+  if(NOT rc STREQUAL "0")
+    fail("render --heightmap design1/heightmap.pfm (relative to the working directory): exit code ${rc}: ${err}")
+  endif()
+
   # The designed heightmap renders again through --heightmap to the error it reported.
   run(render-design render "${DATA}/design-tiny.json" --heightmap "${WORK}/design1/heightmap.pfm" --out rerender)
   if(NOT rc STREQUAL "0")

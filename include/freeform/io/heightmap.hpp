@@ -22,7 +22,9 @@ inline Heightmap read_heightmap(Scene scene, const std::filesystem::path& file, 
     const ImageF img = read_pfm(file, limits);
     if (img.cols() < 2 || img.rows() < 2)
         throw InputError(file.string() + ": a height map must be at least 2 x 2 pixels");
-    scene.surface.initial_pfm = file;
+    // The file was read relative to the working directory; the scene resolves a relative
+    // surface.initial against its own folder, so hand it the absolute path.
+    scene.surface.initial_pfm = std::filesystem::absolute(file);
     scene.surface.initial_paraboloid.reset();
     return make_initial_heightmap(scene, int(img.cols()), int(img.rows()), limits);
 }
