@@ -137,7 +137,9 @@ py::array_t<double, py::array::c_style | py::array::forcecast> real_matrix(const
 }
 
 // A target image from an array, checked as io::load_target_image checks an image file
-// (relative irradiance, any size: the design resamples it to the receiver as it does a file).
+// (relative irradiance, any size: the caller brings it up to the receiver's pixel count
+// where it has fewer, by the linear reconstruction, and the design area-averages it down,
+// as load_target_image and the design do with a file).
 freeform::ImageD target_from_array(const py::handle& obj) {
     const auto a = real_matrix(obj, "target");
     const auto v = a.unchecked<2>();
@@ -381,8 +383,9 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     }
     std::optional<freeform::ImageD> target;
     if (!target_arg.is_none()) {
-        target = target_from_array(target_arg);
-        scene.target = array_target_spec(*target);
+        const freeform::ImageD raw = target_from_array(target_arg);
+        scene.target = array_target_spec(raw);
+        target = freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
     }
     try {
         freeform::check_designable(scene);
@@ -466,8 +469,9 @@ py::tuple render(const PyScene& ps, const py::object& heightmap, const py::objec
     job.tracer = scene.trace.tracer;
     freeform::choose_tracer(scene, !mesh.is_none(), job.tracer, freeform::embree_available);
     if (!target_arg.is_none()) {
-        job.target = target_from_array(target_arg);
-        scene.target = array_target_spec(*job.target);
+        const freeform::ImageD raw = target_from_array(target_arg);
+        scene.target = array_target_spec(raw);
+        job.target = freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
     } else if (scene.target) {
         job.target = freeform::io::load_target_image(scene, limits);
     }

@@ -25,6 +25,9 @@ namespace fs = std::filesystem;
 using freeform::ImageD;
 using freeform::ImageF;
 using freeform::InputError;
+using freeform::Scene;
+using freeform::TargetSpec;
+using freeform::TargetUpsample;
 using freeform::IoError;
 using freeform::TriangleMesh;
 using freeform::Vec3d;
@@ -114,6 +117,31 @@ TEST_CASE("PFM round trip is bit exact and stores the bottom row first") {
     CHECK(float_at(raw, header.size() + 4 * 7 * 4) == 42.0f);        // last stored row = top row
     CHECK(float_at(raw, header.size() + (0 * 7 + 3) * 4) == img(4, 3));
     CHECK_FALSE(has_temp_leftovers(dir.path));
+}
+
+TEST_CASE("load_target_image brings a coarse image up to the receiver smoothly, or as blocks on request") {
+    TempDir dir;
+    ImageF img(2, 3);  // 3 x 2 pixels: a left-to-right ramp on top, dark below
+    img << 1.0f, 2.0f, 3.0f,  //
+        0.0f, 0.0f, 0.0f;
+    const fs::path file = dir / "coarse.pfm";
+    io::write_pfm(file, img);
+    Scene scene;
+    scene.receiver.width = 12;
+    scene.receiver.height = 2;
+    scene.target = TargetSpec{};
+    scene.target->image = file;
+    const ImageD smooth = io::load_target_image(scene);
+    REQUIRE(smooth.cols() == 12);  // columns brought up to the receiver's 12
+    REQUIRE(smooth.rows() == 2);   // rows already enough: kept
+    for (int x = 1; x < 12; ++x) CHECK(smooth(0, x) >= smooth(0, x - 1));
+    CHECK(smooth(0, 0) == doctest::Approx(1.0));    // before the first centre: the first pixel
+    CHECK(smooth(0, 5) == doctest::Approx(1.875));  // [1.25, 1.5]: the line t + ½ has mean 1.875 there
+    CHECK(smooth(1, 7) == 0.0);
+    scene.target->upsample = TargetUpsample::box;
+    const ImageD blocks = io::load_target_image(scene);
+    REQUIRE(blocks.cols() == 3);  // as stored: make_target area-averages it (blocks of 4)
+    CHECK(blocks(0, 1) == 2.0);
 }
 
 TEST_CASE("PFM reader: RGB averaged to grey, big-endian data, .pfm via read_image_grey") {

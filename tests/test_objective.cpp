@@ -374,6 +374,52 @@ TEST_CASE("area resampling preserves the mean and constants, for any ratio") {
     CHECK(half(0, 1) == doctest::Approx(4.0));
 }
 
+TEST_CASE("upsampling reproduces a linear picture exactly and keeps axes that have enough pixels") {
+    // Pixel k of a ramp holds the picture's value at its centre, k + ½ (in pixel units).
+    // The linear reconstruction of a ramp is the ramp itself between the first and last
+    // centres, and constant beyond them; the new pixel is its mean over the pixel's area.
+    const int W = 5, H = 4, w = 23, h = 9;
+    ImageD ramp(H, W);
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) ramp(y, x) = 2.0 * (x + 0.5) - 3.0 * (y + 0.5);
+    const ImageD up = upsample_linear(ramp, w, h);
+    REQUIRE(up.cols() == w);
+    REQUIRE(up.rows() == h);
+    // The mean over [a, b] of t clamped to [½, n − ½], integrated piecewise by hand.
+    auto clamped_mean = [](double a, double b, int n) {
+        const double lo = 0.5, hi = n - 0.5;
+        auto integral = [&](double t) {  // ∫_0^t clamp(s) ds
+            if (t <= lo) return lo * t;
+            if (t <= hi) return lo * lo + 0.5 * (t * t - lo * lo);
+            return lo * lo + 0.5 * (hi * hi - lo * lo) + hi * (t - hi);
+        };
+        return (integral(b) - integral(a)) / (b - a);
+    };
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const double sx = double(W) / w, sy = double(H) / h;
+            const double want = 2.0 * clamped_mean(x * sx, (x + 1) * sx, W) - 3.0 * clamped_mean(y * sy, (y + 1) * sy, H);
+            CHECK(up(y, x) == doctest::Approx(want).epsilon(1e-12));
+        }
+    // Constants stay constant; an axis with at least as many pixels as asked is kept.
+    const ImageD c = upsample_linear(ImageD::Constant(3, 7, 1.5), 20, 11);
+    CHECK((c - 1.5).abs().maxCoeff() < 1e-12);
+    const ImageD img = random_image(8, 3, 5);
+    const ImageD tall = upsample_linear(img, 4, 6);
+    REQUIRE(tall.cols() == 8);
+    REQUIRE(tall.rows() == 6);
+    CHECK((upsample_linear(img, 8, 3) - img).abs().maxCoeff() == 0.0);
+    // Between two pixels the new ones step through the values in between, no blocks:
+    // two pixels 0 and 1 brought up to 8 give a rising ramp from the first centre on.
+    ImageD two(1, 2);
+    two << 0.0, 1.0;
+    const ImageD eight = upsample_linear(two, 8, 1);
+    for (int x = 1; x < 8; ++x) CHECK(eight(0, x) >= eight(0, x - 1));
+    CHECK(eight(0, 0) == 0.0);
+    CHECK(eight(0, 7) == 1.0);
+    CHECK(eight(0, 3) == doctest::Approx(0.375));  // cell [0.75, 1]: the line t − ½ has mean 0.375 there
+}
+
 TEST_CASE("make_target at another resolution is the area-resampled image scaled to N") {
     const ImageD img = random_image(40, 30, 9);
     const Fixed n = to_fixed(4321.0);

@@ -372,6 +372,8 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
         {"target margin", {{"target", {{"text", "E"}, {"margin", 0.45}}}}, "target.margin: ", "[0, 0.45)"},
         {"font with image", {{"target", {{"image", "E.png"}, {"font", "X"}}}}, "target.font: ", "text target"},
         {"empty image path", {{"target", {{"image", ""}}}}, "target.image: ", "empty"},
+        {"bad upsample", {{"target", {{"image", "E.png"}, {"upsample", "cubic"}}}}, "target.upsample: ", "\"box\""},
+        {"upsample with text", {{"target", {{"text", "E"}, {"upsample", "box"}}}}, "target.upsample: ", "image target"},
         {"meshes not array", {{"meshes", {{"file", "a.obj"}}}}, "meshes: ", "expected an array"},
         {"mesh entry not object", {{"meshes", {1}}}, "meshes[0]: ", "expected an object"},
         {"mesh without file", {{"meshes", {{{"material", "mirror"}}}}}, "meshes[0].file: ", "missing required key"},

@@ -88,10 +88,11 @@ def test_arrays_shapes_and_dtypes(py_design):
 
 
 def test_target_array_is_designed_as_the_same_image_file(ff, tmp_path):
-    # A 48 x 40 image (not the receiver's 32 x 32: resampled) as a PFM file for the
-    # command line and as an array for Python: the same design bit for bit.
-    y, x = np.mgrid[0:40, 0:48]
-    image = ((x - 20.0) ** 2 + (y - 22.0) ** 2 < 150).astype(np.float32) * (1 + x / 48.0).astype(np.float32)
+    # A 48 x 20 image (not the receiver's 32 x 32: averaged down along x, brought up
+    # smoothly along y) as a PFM file for the command line and as an array for Python:
+    # the same design bit for bit.
+    y, x = np.mgrid[0:20, 0:48]
+    image = ((x - 20.0) ** 2 + (2 * y - 22.0) ** 2 < 150).astype(np.float32) * (1 + x / 48.0).astype(np.float32)
     write_pfm(tmp_path / "target.pfm", image)
     scene = ff.Scene.load(str(SCENES / "tiny.json")).to_json()
     scene["target"] = {"image": "target.pfm"}
@@ -102,7 +103,7 @@ def test_target_array_is_designed_as_the_same_image_file(ff, tmp_path):
     assert np.array_equal(d.irradiance.astype(np.float32), read_pfm(tmp_path / "cli" / "irradiance.pfm"))
     assert d.target.shape == (32, 32)
     cli = load_json(tmp_path / "cli" / "metrics.json")
-    assert d.metrics["effective_scene"]["target"] == {"image": "(NumPy array, 48 x 40)"}
+    assert d.metrics["effective_scene"]["target"] == {"image": "(NumPy array, 48 x 20)", "upsample": "bilinear"}
     for m in (cli, d.metrics):
         del m["effective_scene"]["target"], m["scene"]
     assert without_timings(d.metrics) == without_timings(cli)

@@ -40,6 +40,6 @@ def test_render_of_the_scenes_start_equals_the_command_lines(ff, tmp_path):
 def test_render_with_a_target_array(ff, py_design):
     scene = ff.Scene.load(str(SCENES / "no-target.json"))
     irradiance, metrics = ff.render(scene, py_design.heightmap, target=py_design.target, threads=2)
-    assert metrics["effective_scene"]["target"] == {"image": "(NumPy array, 32 x 32)"}
+    assert metrics["effective_scene"]["target"] == {"image": "(NumPy array, 32 x 32)", "upsample": "bilinear"}
     # The design's own surface against its own target: close to the design's figure.
     assert abs(metrics["error_physical"] - py_design.metrics["export"]["forms"]["designed"]["error_physical"]) < 0.02

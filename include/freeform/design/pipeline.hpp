@@ -407,7 +407,8 @@ inline CompletedDesign design(PlannedDesign plan, const ImageD& target, const De
 }
 
 // Designs the job's scene with its options so that its light matches `target` (relative irradiance, any
-// resolution: io::load_target_image makes it from the scene's target block): plans it
+// resolution, area-averaged to each level: io::load_target_image makes it from the scene's target block,
+// brought up smoothly to the receiver's pixels where it has fewer, upsample_linear): plans it
 // (plan_design), makes the start, anneals, and finishes the result (finish_design). The
 // one entry point of a design (the overload above is it with the plan made by the
 // caller); mpi::design (freeform/mpi/design.hpp) is the same over MPI ranks. Throws

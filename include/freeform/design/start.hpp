@@ -263,12 +263,18 @@ inline ImageD reweighted_target(const ImageD& target, const CellMeans& lit) {
 
 // Whether a design of `scene` with `time_budget` seconds (0: none) affords the second
 // solve on a grid of at most `max_grid` a side: the first solves and the second, by
-// start_grid_limit's fixed rates (the second counted as a cold solve of the fine grid,
-// and its irradiance at a quarter of the tracer's rate per ray: cell means, no
-// objective), within start_budget_share of the budget. The letter E at 20 s (a 9 s
-// start, 19 s on a loaded machine, where annealing then never ran) and a 512² receiver
-// whose grid already takes the share go without; the E at 40 s and a 200² photograph at
-// 60 s get it. Fixed rates, so the decision depends on the scene and options alone.
+// start_grid_limit's fixed rates, within reweight_budget_share of the budget. The second
+// solve starts from the first's potential (OtOptions::warm_phi: 6 to 11 iterations where
+// a cold solve takes 14 to 18), so its grid is counted at warm_solve_fraction of a cold
+// solve, and its irradiance at a quarter of the tracer's rate per ray (cell means, no
+// objective). The share is larger than the grid's (start_budget_share): the reweighted
+// start gains on every scene measured, and on a large receiver it is worth more than the
+// annealing it displaces (a 512² photograph in 120 s: 68 s of start, designed surface
+// 0.0146 against 0.0169 for the first start, which annealing did not improve on;
+// docs/performance.md, "The reweighted start"). The letter E at 20 s (a 9 s start, 19 s on
+// a loaded machine, where annealing then never ran) still goes without. Fixed rates, so
+// the decision depends on the scene and options alone.
+inline constexpr double warm_solve_fraction = 0.55, reweight_budget_share = 2.0 / 3.0;
 inline bool start_reweight_fits(const Scene& scene, double time_budget, int max_grid) {
     if (!(time_budget > 0)) return true;
     const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
@@ -277,8 +283,9 @@ inline bool start_reweight_fits(const Scene& scene, double time_budget, int max_
     const double rays = double(ray_budget(scene.light, scene.receiver));
     const double lit_rays = reweight_rays_per_cell * double(scene.receiver.cells());
     const double first = start_seconds_per_cell * (fine * fine + coarse * coarse) + start_seconds_per_ray * rays;
-    const double second = start_seconds_per_cell * fine * fine + 0.25 * start_seconds_per_ray * lit_rays;
-    return first + second <= start_budget_share * time_budget;
+    const double second =
+        warm_solve_fraction * start_seconds_per_cell * fine * fine + 0.25 * start_seconds_per_ray * lit_rays;
+    return first + second <= reweight_budget_share * time_budget;
 }
 
 // The designed surface's cell means: the height field traced with its Phong patches.

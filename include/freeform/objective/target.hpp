@@ -12,6 +12,7 @@
 #include <numeric>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "../core/error.hpp"
@@ -55,6 +56,76 @@ inline ImageD resample_area(const ImageD& img, int w, int h) {
             }
             out(y, x) = sum / (sx * sy);
         }
+    }
+    return out;
+}
+
+namespace target_detail {
+
+// One axis of the linear reconstruction of n pixels (their values at the pixel centres
+// k + ½, joined by straight lines, held constant beyond the first and last centre),
+// averaged over each of m equal cells spanning the same extent [0, n): for every cell the
+// (pixel, weight) pairs, weights summing to 1. The reconstruction is linear between two
+// centres, so its mean over a piece between them is its value at the piece's midpoint.
+inline std::vector<std::vector<std::pair<int, double>>> linear_cell_weights(int n, int m) {
+    std::vector<std::vector<std::pair<int, double>>> rows(static_cast<std::size_t>(m));
+    const double s = double(n) / m;
+    for (int i = 0; i < m; ++i) {
+        const double a = i * s, b = (i + 1) * s;
+        auto& row = rows[std::size_t(i)];
+        auto add = [&](int k, double w) {
+            for (auto& [j, v] : row)
+                if (j == k) {
+                    v += w;
+                    return;
+                }
+            row.emplace_back(k, w);
+        };
+        for (double p = a; p < b;) {
+            const double q = std::min(b, std::floor(p - 0.5) + 1.5);  // the next centre after p
+            const double t = 0.5 * (p + q) - 0.5;                     // the midpoint, in centre units
+            const double w = (q - p) / (b - a);
+            if (t <= 0) {
+                add(0, w);
+            } else if (t >= n - 1) {
+                add(n - 1, w);
+            } else {
+                const int k = int(std::floor(t));
+                add(k, w * (1 - (t - k)));
+                add(k + 1, w * (t - k));
+            }
+            p = q;
+        }
+    }
+    return rows;
+}
+
+}  // namespace target_detail
+
+// A target image brought up to w × h pixels along each axis where it has fewer: its
+// pixels are samples of a smooth picture (a photograph's are), so the picture between
+// them is the linear reconstruction through their centres, and each new pixel is that
+// reconstruction's mean over its area (docs/scene.md, target.upsample). A piecewise-
+// constant (box) enlargement would ask the optic for the old pixels' edges, steps a
+// smooth surface cannot make and no one wants. An axis with at least as many pixels is
+// kept as it is (make_target area-averages it down). Light is conserved up to the
+// reconstruction's edge, which make_target's normalisation absorbs.
+inline ImageD upsample_linear(const ImageD& img, int w, int h) {
+    const int W = int(img.cols()), H = int(img.rows());
+    ImageD out = img;
+    if (W > 0 && w > W) {
+        const auto rows = target_detail::linear_cell_weights(W, w);
+        ImageD t = ImageD::Zero(H, w);
+        for (int x = 0; x < w; ++x)
+            for (const auto& [k, v] : rows[std::size_t(x)]) t.col(x) += v * out.col(k);
+        out = std::move(t);
+    }
+    if (H > 0 && h > H) {
+        const auto rows = target_detail::linear_cell_weights(H, h);
+        ImageD t = ImageD::Zero(h, out.cols());
+        for (int y = 0; y < h; ++y)
+            for (const auto& [k, v] : rows[std::size_t(y)]) t.row(y) += v * out.row(k);
+        out = std::move(t);
     }
     return out;
 }

@@ -53,8 +53,15 @@ struct SurfaceSpec {
     std::optional<InitialParaboloid> initial_paraboloid;
 };
 
+// How an image with fewer pixels than the receiver is brought up to it (objective/target.hpp):
+// the linear reconstruction through its pixel centres, or its pixels as blocks.
+enum class TargetUpsample { bilinear, box };
+inline constexpr std::array<EnumName<TargetUpsample>, 2> target_upsample_names{
+    {{"bilinear", TargetUpsample::bilinear}, {"box", TargetUpsample::box}}};
+
 struct TargetSpec {
     std::filesystem::path image;  // PNG/JPG/... or PFM, grey levels are relative irradiance
+    TargetUpsample upsample = TargetUpsample::bilinear;  // an image coarser than the receiver
     std::string text;             // or a text rendered with a TrueType font
     std::string font = "DejaVuSans-Bold";
     double margin = 0.1;  // fraction of the receiver left dark around the text
