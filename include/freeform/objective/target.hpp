@@ -5,7 +5,10 @@
 // rendered text). For a level with receiver resolution W × H and N emitted weight, the
 // image is area-averaged to W × H (a box filter: coarse levels see the mean of the
 // pixels they cover) and scaled so that its cells sum to exactly N (docs/architecture.md §1), with
-// the rounding remainder given to the cells with the largest fractional parts.
+// the rounding remainder given to the cells with the largest fractional parts. An image
+// coarser than the scene's receiver has already been brought up to it smoothly
+// (upsample_linear below, called by io::load_target_image), so no level sees its pixels
+// as blocks.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
