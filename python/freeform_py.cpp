@@ -137,9 +137,8 @@ py::array_t<double, py::array::c_style | py::array::forcecast> real_matrix(const
 }
 
 // A target image from an array, checked as io::load_target_image checks an image file
-// (relative irradiance, any size: the caller brings it up to the receiver's pixel count
-// where it has fewer, by the linear reconstruction, and the design area-averages it down,
-// as load_target_image and the design do with a file).
+// (relative irradiance, any size: array_target below brings it up to the receiver's pixel
+// count where it has fewer, and the design area-averages it down, as with a file).
 freeform::ImageD target_from_array(const py::handle& obj) {
     const auto a = real_matrix(obj, "target");
     const auto v = a.unchecked<2>();
@@ -157,6 +156,14 @@ freeform::TargetSpec array_target_spec(const freeform::ImageD& img) {
     freeform::TargetSpec t;
     t.image = "(NumPy array, " + std::to_string(img.cols()) + " x " + std::to_string(img.rows()) + ")";
     return t;
+}
+
+// A target array made the scene's target: recorded as given, and brought up to the
+// receiver as io::load_target_image brings up a file.
+freeform::ImageD array_target(const py::handle& obj, freeform::Scene& scene) {
+    const freeform::ImageD raw = target_from_array(obj);
+    scene.target = array_target_spec(raw);
+    return freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
 }
 
 // The height map of an array, row 0 the surface's +v edge (as heightmap.pfm, Design.heightmap).
@@ -383,9 +390,7 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     }
     std::optional<freeform::ImageD> target;
     if (!target_arg.is_none()) {
-        const freeform::ImageD raw = target_from_array(target_arg);
-        scene.target = array_target_spec(raw);
-        target = freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
+        target = array_target(target_arg, scene);
     }
     try {
         freeform::check_designable(scene);
@@ -469,9 +474,7 @@ py::tuple render(const PyScene& ps, const py::object& heightmap, const py::objec
     job.tracer = scene.trace.tracer;
     freeform::choose_tracer(scene, !mesh.is_none(), job.tracer, freeform::embree_available);
     if (!target_arg.is_none()) {
-        const freeform::ImageD raw = target_from_array(target_arg);
-        scene.target = array_target_spec(raw);
-        job.target = freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
+        job.target = array_target(target_arg, scene);
     } else if (scene.target) {
         job.target = freeform::io::load_target_image(scene, limits);
     }

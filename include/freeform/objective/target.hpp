@@ -76,13 +76,12 @@ inline std::vector<std::vector<std::pair<int, double>>> linear_cell_weights(int 
     for (int i = 0; i < m; ++i) {
         const double a = i * s, b = (i + 1) * s;
         auto& row = rows[std::size_t(i)];
+        // The pieces run left to right, so a pixel met again is the last one added.
         auto add = [&](int k, double w) {
-            for (auto& [j, v] : row)
-                if (j == k) {
-                    v += w;
-                    return;
-                }
-            row.emplace_back(k, w);
+            if (!row.empty() && row.back().first == k)
+                row.back().second += w;
+            else
+                row.emplace_back(k, w);
         };
         for (double p = a; p < b;) {
             const double q = std::min(b, std::floor(p - 0.5) + 1.5);  // the next centre after p
@@ -114,23 +113,16 @@ inline std::vector<std::vector<std::pair<int, double>>> linear_cell_weights(int 
 // kept as it is (make_target area-averages it down). Light is conserved up to the
 // reconstruction's edge, which make_target's normalisation absorbs.
 inline ImageD upsample_linear(const ImageD& img, int w, int h) {
-    const int W = int(img.cols()), H = int(img.rows());
-    ImageD out = img;
-    if (W > 0 && w > W) {
-        const auto rows = target_detail::linear_cell_weights(W, w);
-        ImageD t = ImageD::Zero(H, w);
-        for (int x = 0; x < w; ++x)
-            for (const auto& [k, v] : rows[std::size_t(x)]) t.col(x) += v * out.col(k);
-        out = std::move(t);
-    }
-    if (H > 0 && h > H) {
-        const auto rows = target_detail::linear_cell_weights(H, h);
-        ImageD t = ImageD::Zero(h, out.cols());
-        for (int y = 0; y < h; ++y)
-            for (const auto& [k, v] : rows[std::size_t(y)]) t.row(y) += v * out.row(k);
-        out = std::move(t);
-    }
-    return out;
+    // Along the columns; the rows are the same step on the transpose.
+    const auto widen = [](const ImageD& a, int m) -> ImageD {
+        if (a.cols() == 0 || m <= a.cols()) return a;
+        const auto cells = target_detail::linear_cell_weights(int(a.cols()), m);
+        ImageD t = ImageD::Zero(a.rows(), m);
+        for (int x = 0; x < m; ++x)
+            for (const auto& [k, v] : cells[std::size_t(x)]) t.col(x) += v * a.col(k);
+        return t;
+    };
+    return widen(widen(img, w).transpose(), h).transpose();
 }
 
 // Builds the fixed-point target of one level from a relative-irradiance image.
