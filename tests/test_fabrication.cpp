@@ -131,6 +131,17 @@ TEST_CASE("the automatic level keeps the exported mesh within its triangle budge
     CHECK(roomy.tolerance_met);
     CHECK(roomy.normal_error <= roomy.normal_tolerance);
     CHECK(roomy.subdivisions < 16);
+    CHECK_FALSE(roomy.capped);
+    // A tolerance out of reach with triangles to spare: the cap of 16 stops k, not the
+    // budget, and the fabrication says which (what_stopped_k).
+    o.tolerance = 1e-6;
+    o.max_triangles = 1'000'000'000;
+    const Fabrication capped = make_fabrication(s, o, curved);
+    CHECK(capped.subdivisions == max_auto_subdivisions);
+    CHECK(capped.capped);
+    CHECK(what_stopped_k(capped).find("cap of 16") != std::string::npos);
+    CHECK_FALSE(f.capped);
+    CHECK(what_stopped_k(f) == "optimise.export_max_triangles = 20000 allows no more");
 }
 
 TEST_CASE("a budget between whole levels is filled with a fractional k") {
@@ -278,6 +289,45 @@ TEST_CASE("a lens's exported top: the face as designed, the rim continuing its e
     s.receiver.size = {0.05, 0.05};
     CHECK(lens_rim(s) == 0);
     CHECK(export_blank(s, face).nx() == face.nx());
+}
+
+TEST_CASE("a lens's rim gets one facet pair a cell, and the budget counts every triangle of the solid") {
+    Scene s = wide_lens_scene();
+    s.surface.phong_alpha = 0.5;
+    Heightmap face = surface_for(s, 81);
+    shape(face, [](double u, double v) { return 0.002 * std::sin(60 * u) * std::cos(45 * v) + 0.3 * u * v; });
+    const Heightmap top = export_blank(s, face);
+    const CoarseBorder border = export_rim_cells(s, face);
+    REQUIRE(border.u > 1);
+    CHECK(top.nx() == face.nx() + 2 * border.u);
+    CHECK(top.ny() == face.ny() + 2 * border.v);
+    ExportOptions o;
+    o.tolerance = 0.001;  // out of reach: the budget sets k
+    o.max_triangles = 200'000;
+    const Fabrication f = make_fabrication(s, o, face);
+    MESSAGE("k = ", f.subdivisions, ", ", f.mesh.triangles.size(), " triangles; rim ", border.u, " cells");
+    CHECK(f.mesh.triangles.size() <= 200'000u);
+    CHECK(f.mesh.triangles.size() > 195'000u);  // the budget is filled, not left at a whole k
+    CHECK_FALSE(f.capped);
+    const detail::FineGrid g = detail::fine_grid(top, f.subdivisions, border);
+    CHECK(std::int64_t(f.mesh.triangles.size()) == export_triangle_count(top, g, true));
+    // The rim's columns and rows are one sub-cell wide; the face's get k on average.
+    for (int c = 0; c < border.u; ++c) {
+        CHECK(g.kx(c) == 1);
+        CHECK(g.kx(top.nx() - 2 - c) == 1);
+    }
+    CHECK(double(g.x[std::size_t(top.nx() - 1 - border.u)] - g.x[std::size_t(border.u)]) ==
+          doctest::Approx(f.subdivisions * (face.nx() - 1)).epsilon(0.01));
+    // Without the border the same k would overrun the budget.
+    const std::int64_t uniform = export_triangle_count(top, detail::fine_grid(top, f.subdivisions), true);
+    CHECK(uniform > 200'000);
+    // Still one valid solid, holding the same glass as the solid faceted alike everywhere
+    // (the rim's top is straight across: its facets add nothing to the shape).
+    const MeshCheck c = check_mesh(f.mesh);
+    CHECK(c.watertight());
+    const MeshCheck fine = check_mesh(lens_solid(top, std::get<Lens>(s.surface.material), 0.5f, f.subdivisions));
+    CHECK(fine.watertight());
+    CHECK(c.volume == doctest::Approx(fine.volume).epsilon(1e-6));
 }
 
 TEST_CASE("a mesh is its geometry: stored normals change nothing unless asked for") {

@@ -431,12 +431,9 @@ void print_forms(const CompletedDesign& d, const json& m) {
     }
     if (!fab.tolerance_met)
         std::printf("  the facets miss their tolerance: %.3f mrad at the 90th percentile against %.3f mrad at "
-                    "k = %s%s; surface.step / surface.dat keep the designed surface\n",
+                    "k = %s (%s); surface.step / surface.dat keep the designed surface\n",
                     fab.normal_error * 1e3, fab.normal_tolerance * 1e3, subdivisions_text(fab).c_str(),
-                    fab.automatic ? (" (optimise.export_max_triangles = " +
-                                     std::to_string(d.options.exports.max_triangles) + " allows no more)")
-                                        .c_str()
-                                  : " (optimise.export_subdivisions)");
+                    what_stopped_k(fab).c_str());
 }
 
 // The summary a design prints (always, --quiet or not): error_physical first, then the
@@ -744,7 +741,7 @@ void export_mesh(const ExportArgs& a, ExportFile kind, const DesignJob& job, con
                 a.out.string().c_str(), fab.mesh.triangles.size(), k.c_str(), k.c_str(),
                 fab.whole() ? "" : " on average",
                 fab.normal_error * 1e3, fab.normal_tolerance * 1e3,
-                fab.tolerance_met ? "" : ": MISSED within optimise.export_max_triangles");
+                fab.tolerance_met ? "" : (": MISSED (" + what_stopped_k(fab) + ")").c_str());
 #if defined(FREEFORM_WITH_EMBREE)
     if (!target) return;
     const CellMeans c = exported_cell_means(exec::omp_t{a.threads}, scene, hm, exported_geometry(scene, hm, fab.subdivisions),

@@ -38,10 +38,8 @@ struct ExportedGeometry {
 };
 
 inline ExportedGeometry exported_geometry(const Scene& scene, const Heightmap& surface, double subdivisions) {
-    const float alpha = float(scene.surface.phong_alpha);
-    if (const Lens* lens = std::get_if<Lens>(&scene.surface.material))
-        return {lens_solid(export_blank(scene, surface), *lens, alpha, subdivisions, false), lens->ior};
-    return {tessellate_surface(surface, alpha, subdivisions, false), std::nullopt};
+    const Lens* lens = std::get_if<Lens>(&scene.surface.material);
+    return {exported_mesh(scene, surface, subdivisions, false), lens ? std::optional<double>(lens->ior) : std::nullopt};
 }
 
 // A smooth form of the design (`point` as in detail::tessellate_local: a fitted spline,

@@ -18,8 +18,10 @@
 // error a user's milled part will have (error_physical in metrics.json).
 #include <algorithm>
 #include <cmath>
-#include <vector>
+#include <optional>
+#include <string>
 #include <variant>
+#include <vector>
 
 #include "../scene/scene.hpp"
 #include "../surface/export.hpp"
@@ -38,10 +40,20 @@ namespace freeform {
 // beyond the first vertex constant: no growing curvature, and the spline fitted over the
 // whole top stays smooth across the edge). The exported solid's walls and back face then
 // stand where the tracer's do (make_material_view).
-inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
+//
+// export_rim_cells: how many whole cells the rim adds beyond each edge (u: at each end
+// along u, v: along v; 0 without a rim), the border the exported mesh keeps at one facet
+// pair a cell (CoarseBorder, surface/export.hpp).
+inline CoarseBorder export_rim_cells(const Scene& scene, const Heightmap& face) {
     const double rim = lens_rim(scene);
-    if (!(rim > 0)) return face;
-    const int pu = int(std::ceil(rim / face.du() - 1e-9)), pv = int(std::ceil(rim / face.dv() - 1e-9));
+    if (!(rim > 0)) return {};
+    return {int(std::ceil(rim / face.du() - 1e-9)), int(std::ceil(rim / face.dv() - 1e-9))};
+}
+
+inline Heightmap export_blank(const Scene& scene, const Heightmap& face) {
+    const CoarseBorder border = export_rim_cells(scene, face);
+    if (border.u == 0 && border.v == 0) return face;
+    const int pu = border.u, pv = border.v;
     const int nx = face.nx() + 2 * pu, ny = face.ny() + 2 * pv;
     std::vector<double> h(std::size_t(nx) * std::size_t(ny));
     const auto at = [&](int i, int j) -> double& { return h[std::size_t(j) * std::size_t(nx) + std::size_t(i)]; };
@@ -87,6 +99,10 @@ struct Fabrication {
     // normal_error <= normal_tolerance. False when the triangle budget (or the cap of 16)
     // stopped k short: the summary and metrics.json say so (docs/export.md).
     bool tolerance_met = false;
+    // The tolerance was missed at the cap of max_auto_subdivisions, with triangles to spare:
+    // the cap, not optimise.export_max_triangles, stopped k (export_subdivisions sets more).
+    bool capped = false;
+    std::int64_t max_triangles = 0;  // the budget it was chosen within (optimise.export_max_triangles)
 
     // Whether k is a whole number (every cell k × k) or a fraction that fills the budget.
     bool whole() const { return subdivisions == std::floor(subdivisions); }
@@ -94,7 +110,8 @@ struct Fabrication {
 
 // Upper bound of the "auto" level. The level is also held to the scene's
 // optimise.export_max_triangles (2 million by default: a 100 MB binary STL), so the
-// surface's own mesh decides how fine the facets can be: k² ≤ max / (2 · cells).
+// surface's own mesh decides how fine the facets can be: k² ≤ max / (2 · cells) for a
+// mirror's sheet; a lens's solid counts its rim (one facet pair a cell), walls and back too.
 //
 // Why so fine: error_physical (cell means, docs/measures.md) sees every displacement of
 // light across a cell edge, and facets displace it most where the surface is most
@@ -112,25 +129,27 @@ struct Fabrication {
 // per-cell rule coarsens most cells (docs/export.md).
 inline constexpr int max_auto_subdivisions = 16;
 
-// The largest k whose mesh stays within `max_triangles` (at least 1).
-inline int subdivisions_for_triangles(const Heightmap& surface, std::int64_t max_triangles) {
-    const std::int64_t cells = active_cell_count(surface);
+// The largest whole k (at least 1, at most max_k) whose mesh stays within `max_triangles`:
+// the sheet of `top` (a mirror) or, with `solid`, the lens solid over it with `border`
+// kept at one facet pair a cell (export_triangle_count, surface/export.hpp).
+inline int subdivisions_for_triangles(const Heightmap& top, std::int64_t max_triangles, int max_k = 1 << 16,
+                                      CoarseBorder border = {}, bool solid = false) {
+    const std::int64_t cells = detail::cells_inside_border(top, border);
     if (cells == 0) return 1;
-    return std::max(1, int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))));
+    // The first guess counts 2 k² for each cell inside the border: an upper bound, which
+    // the border's cells, a solid's walls and its back face bring down.
+    int k = std::clamp(int(std::floor(std::sqrt(double(max_triangles) / (2.0 * double(cells))))), 1, max_k);
+    while (k > 1 && export_triangle_count(top, detail::fine_grid(top, k, border), solid) > max_triangles) --k;
+    return k;
 }
 
 // The triangles of the sheet with s facet pairs a cell side (detail::fine_grid).
 inline std::int64_t sheet_triangles(const Heightmap& surface, double s) {
-    const detail::FineGrid g = detail::fine_grid(surface, s);
-    std::int64_t t = 0;
-    for (int cj = 0; cj + 1 < surface.ny(); ++cj)
-        for (int ci = 0; ci + 1 < surface.nx(); ++ci)
-            if (surface.cell_active(ci, cj)) t += 2 * std::int64_t(g.kx(ci)) * g.ky(cj);
-    return t;
+    return export_triangle_count(surface, detail::fine_grid(surface, s), false);
 }
 
-// The largest fractional k (to a thousandth, at most max_k) whose sheet stays within
-// `max_triangles`, or 1 where even that does not.
+// The largest fractional k (to a thousandth, at most max_k) whose mesh stays within
+// `max_triangles` (as subdivisions_for_triangles), or 1 where even that does not.
 //
 // Why fractional: the budget rarely falls on a whole k. On the 401² mesh of a 200²
 // receiver 2 million triangles allow k = 2.5 where the whole k = 2 uses 1.28 million,
@@ -139,14 +158,39 @@ inline std::int64_t sheet_triangles(const Heightmap& surface, double s) {
 // whole k would: measured on the letter E's demo design (401²), k = 2 0.0185, k = 3 0.0163
 // (2.9 million triangles), k = 2.5 within the budget; on the 512² photograph k = 1 0.115,
 // k = 2 0.061 (2.1 million), k = 1.95 within it.
-inline double fractional_subdivisions_for_triangles(const Heightmap& surface, std::int64_t max_triangles,
-                                                    double max_k) {
-    const std::int64_t cells = active_cell_count(surface);
+inline double fractional_subdivisions_for_triangles(const Heightmap& top, std::int64_t max_triangles, double max_k,
+                                                    CoarseBorder border = {}, bool solid = false) {
+    const std::int64_t cells = detail::cells_inside_border(top, border);
     if (cells == 0) return 1;
+    // The first guess counts 2 s² for each cell inside the border; rounding the fine lines
+    // can add a line per axis, and the border's cells, a solid's walls and its back face
+    // add more: step down until the count fits.
     double s = std::min(max_k, std::floor(1000 * std::sqrt(double(max_triangles) / (2.0 * double(cells)))) / 1000);
-    // Rounding the fine lines can add a line per axis: step down until the count fits.
-    while (s > 1 && sheet_triangles(surface, s) > max_triangles) s = std::max(1.0, s - 0.001);
+    while (s > 1 && export_triangle_count(top, detail::fine_grid(top, s, border), solid) > max_triangles)
+        s = std::max(1.0, s - 0.001);
     return std::max(1.0, s);
+}
+
+// What stopped k short of the tolerance, in words for the summary and metrics.json.
+inline std::string what_stopped_k(const Fabrication& f) {
+    if (!f.automatic) return "optimise.export_subdivisions";
+    if (f.capped)
+        return "the cap of " + std::to_string(max_auto_subdivisions) +
+               " facet pairs a cell side for \"auto\"; optimise.export_subdivisions sets more";
+    return "optimise.export_max_triangles = " + std::to_string(f.max_triangles) + " allows no more";
+}
+
+// The exported mesh of `surface` with s facet pairs a cell side, in the world frame or
+// the surface frame: the sheet (a mirror) or the closed solid over the lens blank
+// (export_blank), its rim kept at one facet pair a cell (export_rim_cells). The one
+// place that decides the mesh, so that what is written (make_fabrication) and what is
+// judged (design/exported.hpp) are the same triangles.
+inline TriangleMesh exported_mesh(const Scene& scene, const Heightmap& surface, double s, bool world_frame = true) {
+    const auto alpha = float(scene.surface.phong_alpha);
+    if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
+        return lens_solid(export_blank(scene, surface), *lens, alpha, s, world_frame,
+                          export_rim_cells(scene, surface));
+    return tessellate_surface(surface, alpha, s, world_frame);
 }
 
 inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& options, const Heightmap& surface) {
@@ -154,16 +198,23 @@ inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& opt
     const double alpha = scene.surface.phong_alpha;
     f.normal_tolerance = facet_normal_tolerance(scene, options.tolerance);
     f.automatic = options.subdivisions <= 0;
+    f.max_triangles = options.max_triangles;
     if (f.automatic) {
-        const int max_k = std::min(max_auto_subdivisions,
-                                   subdivisions_for_triangles(surface, options.max_triangles));
+        // The budget counts every triangle written: a lens's rim, walls and back face too.
+        const bool solid = std::holds_alternative<Lens>(scene.surface.material);
+        const std::optional<Heightmap> blank =
+            solid ? std::optional<Heightmap>(export_blank(scene, surface)) : std::nullopt;
+        const Heightmap& top = blank ? *blank : surface;
+        const CoarseBorder border = export_rim_cells(scene, surface);
+        const int max_k =
+            subdivisions_for_triangles(top, options.max_triangles, max_auto_subdivisions, border, solid);
         const SubdivisionChoice c = subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_k);
         f.subdivisions = c.k;
         f.normal_error = c.normal_error;
         // The budget stopped k short of the tolerance: fill it with a fractional k.
         if (c.normal_error > f.normal_tolerance && c.k == max_k) {
-            const double s = fractional_subdivisions_for_triangles(surface, options.max_triangles,
-                                                                    double(max_auto_subdivisions));
+            const double s = fractional_subdivisions_for_triangles(top, options.max_triangles,
+                                                                    double(max_auto_subdivisions), border, solid);
             if (s > double(c.k)) {
                 f.subdivisions = s;
                 f.normal_error = tessellation_normal_error(surface, alpha, s, 0.9);
@@ -174,10 +225,8 @@ inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& opt
         f.normal_error = tessellation_normal_error(surface, alpha, f.subdivisions, 0.9);
     }
     f.tolerance_met = f.normal_error <= f.normal_tolerance;
-    if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
-        f.mesh = lens_solid(export_blank(scene, surface), *lens, float(alpha), f.subdivisions);
-    else
-        f.mesh = tessellate_surface(surface, float(alpha), f.subdivisions);
+    f.capped = f.automatic && !f.tolerance_met && f.subdivisions >= double(max_auto_subdivisions);
+    f.mesh = exported_mesh(scene, surface, f.subdivisions);
     return f;
 }
 

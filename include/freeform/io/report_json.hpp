@@ -147,9 +147,9 @@ inline void add_export_json(nlohmann::json& m, const Scene& scene, const ExportC
     if (!c.fabrication.tolerance_met)
         exported["tolerance_missed"] =
             c.fabrication.automatic
-                ? "the facets' normal error exceeds the tolerance at the finest k that "
-                  "optimise.export_max_triangles (and the cap of 16) allows; surface.step / surface.dat keep the "
-                  "designed surface (docs/export.md)"
+                ? "the facets' normal error exceeds the tolerance at the finest k allowed (" +
+                      what_stopped_k(c.fabrication) +
+                      "); surface.step / surface.dat keep the designed surface (docs/export.md)"
                 : "the facets' normal error exceeds the tolerance at the fixed optimise.export_subdivisions";
     exported["triangles"] = c.fabrication.mesh.triangles.size();
     if (c.cells) {

@@ -100,19 +100,50 @@ struct FineGrid {
     int ky(int cj) const { return y[std::size_t(cj) + 1] - y[std::size_t(cj)]; }
 };
 
-inline void fine_lines(int n, double s, std::vector<int>& start, std::vector<int>& cell) {
+inline void fine_lines(int n, double s, std::vector<int>& start, std::vector<int>& cell, int border = 0) {
     start.resize(std::size_t(n));
-    for (int c = 0; c < n; ++c) start[std::size_t(c)] = int(std::llround(double(c) * s));
+    // The first and last `border` cells get one sub-cell each (CoarseBorder).
+    if (border < 0 || 2 * border >= n - 1) border = 0;
+    const int last = n - 1 - border;  // the line where the far border starts
+    for (int c = 0; c < n; ++c)
+        start[std::size_t(c)] = c <= border ? c
+                                : c <= last ? border + int(std::llround(double(c - border) * s))
+                                            : start[std::size_t(last)] + (c - last);
     cell.resize(std::size_t(start.back()) + 1);
     for (int c = 0; c + 1 < n; ++c)
         for (int f = start[std::size_t(c)]; f < start[std::size_t(c) + 1]; ++f) cell[std::size_t(f)] = c;
     cell.back() = n - 2;
 }
 
-inline FineGrid fine_grid(const Heightmap& hm, double s) {
+}  // namespace detail
+
+// The cells along the edges of a height map that are tessellated with one facet pair a
+// side whatever the level: `u` columns at each end along u, `v` rows at each end along v.
+// A lens blank's rim (design/fabrication.hpp, export_blank) is such a border: light falls
+// on the face only and rays inside the glass only go down, so no traced ray meets the
+// rim's top, and finer facets there would only spend the triangle budget (on a lens that
+// spreads its light the rim can be a third of the top's cells). The grid stays one tensor
+// product: a rim cell beside the face shares the face's fine lines along their common
+// edge, so the front has no cracks.
+struct CoarseBorder {
+    int u = 0;
+    int v = 0;
+};
+
+namespace detail {
+
+// The active cells that `border` leaves at whatever level the tessellation has.
+inline std::int64_t cells_inside_border(const Heightmap& hm, CoarseBorder border) {
+    std::int64_t cells = 0;
+    for (int j = border.v; j + 1 + border.v < hm.ny(); ++j)
+        for (int i = border.u; i + 1 + border.u < hm.nx(); ++i) cells += hm.cell_active(i, j) ? 1 : 0;
+    return cells;
+}
+
+inline FineGrid fine_grid(const Heightmap& hm, double s, CoarseBorder border = {}) {
     FineGrid g;
-    fine_lines(hm.nx(), s, g.x, g.cell_x);
-    fine_lines(hm.ny(), s, g.y, g.cell_y);
+    fine_lines(hm.nx(), s, g.x, g.cell_x, border.u);
+    fine_lines(hm.ny(), s, g.y, g.cell_y, border.v);
     return g;
 }
 
@@ -412,15 +443,18 @@ inline TriangleMesh tessellate_surface(const Heightmap& hm, float phong_alpha, d
 // face's, −w), for tracing the front as a smooth surface (design/exported.hpp); the
 // front's triangles (2k² per active cell for a whole k) come first in the mesh either
 // way.
+//
+// `border` keeps the cells along the edges at one facet pair (CoarseBorder: a lens blank's
+// rim).
 template <class PointFn>
 TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivisions, PointFn&& point,
-                           bool front_normals, bool world_frame) {
+                           bool front_normals, bool world_frame, CoarseBorder border = {}) {
     detail::check_export_args(hm, 0.0, subdivisions);
     const double t = lens.thickness;
     if (!(t > 0) || !std::isfinite(t))
         throw InputError("lens thickness must be a positive finite number, got " + std::to_string(t));
     const int nx = hm.nx(), ny = hm.ny();
-    const detail::FineGrid g = detail::fine_grid(hm, subdivisions);
+    const detail::FineGrid g = detail::fine_grid(hm, subdivisions, border);
     std::vector<std::int32_t> fine_index;
     TriangleMesh mesh = detail::tessellate_local(hm, g, fine_index, point);
     if (!front_normals) mesh.normals.clear();
@@ -447,13 +481,42 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivi
 
 // The solid over the Phong patches: what is milled or printed (see lens_solid_of above).
 inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phong_alpha, double subdivisions,
-                               bool world_frame = true) {
+                               bool world_frame = true, CoarseBorder border = {}) {
     detail::check_export_args(hm, phong_alpha, subdivisions);
     const double alpha = double(phong_alpha);
     return lens_solid_of(
         hm, lens, subdivisions,
         [&](int ci, int cj, double a, double b) { return phong_vertex_in_cell(hm, ci, cj, a, b, alpha); }, false,
-        world_frame);
+        world_frame, border);
+}
+
+// The triangles of the mesh tessellate_surface (solid = false) or lens_solid (solid =
+// true) makes on fine grid `g` (detail::fine_grid), counted without building it: two per
+// sub-cell of an active cell; for the solid also two per wall quad under each sub-edge of
+// the outline, and the back face, two a cell or a fan of one per ring point where a side
+// of the cell is on the outline (detail::LensClosure).
+inline std::int64_t export_triangle_count(const Heightmap& hm, const detail::FineGrid& g, bool solid) {
+    const int nx = hm.nx(), ny = hm.ny();
+    const auto active = [&](int ci, int cj) {
+        return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
+    };
+    std::int64_t t = 0;
+    for (int cj = 0; cj + 1 < ny; ++cj)
+        for (int ci = 0; ci + 1 < nx; ++ci) {
+            if (!active(ci, cj)) continue;
+            const int kx = g.kx(ci), ky = g.ky(cj);
+            t += 2 * std::int64_t(kx) * ky;
+            if (!solid) continue;
+            const bool open[4] = {!active(ci, cj - 1), !active(ci + 1, cj), !active(ci, cj + 1), !active(ci - 1, cj)};
+            const int count[4] = {kx, ky, kx, ky};
+            std::int64_t ring = 0, walls = 0;
+            for (int side = 0; side < 4; ++side) {
+                ring += open[side] ? count[side] : 1;
+                walls += open[side] ? 2 * count[side] : 0;
+            }
+            t += walls + (walls > 0 ? ring : 2);
+        }
+    return t;
 }
 
 // Topology and size of a triangle mesh.
