@@ -220,6 +220,7 @@ TEST_CASE("other light types, a PFM initial surface and an image target") {
 
 TEST_CASE("frames follow u = v x w") {
     json j = minimal_scene();
+    j["receiver"]["center"] = {0, 0, -0.5};  // below the surface, facing it
     j["receiver"]["normal"] = {0, 0, 1};
     j["receiver"]["up"] = {1, 0, 0};
     j["light"] = json::parse(R"({"type": "collimated"})");
@@ -397,6 +398,12 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
          "trace.tracer: ",
          "embree"},
         {"name type", {{"name", 5}}, "name: ", "expected a string"},
+        {"receiver facing away", {{"receiver", {{"normal", {0, 0, 1}}}}}, "receiver.normal: ", "faces away"},
+        {"receiver behind a lens's back face",
+         {{"surface", {{"material", {{"refractive", 1.5}, {"thickness", 0.02}}}}},
+          {"receiver", {{"center", {0, 0, -0.5}}, {"normal", {0, 0, -1}}}}},
+         "receiver.normal: ",
+         "faces away"},
     };
     for (const auto& c : cases) {
         const std::string what = c.what;
@@ -415,6 +422,31 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
         CAPTURE(msg);
         CHECK(starts_with(msg, "scene: expected an object"));
     }
+}
+
+TEST_CASE("a receiver is refused only when no point of the surface lies in front of it") {
+    json j = minimal_scene();
+    // Edge-on through the surface's centre: half the surface is in front of its plane.
+    j["receiver"]["normal"] = {1, 0, 0};
+    CHECK(parse_error(j).empty());
+    // Beyond the surface's edge (0.05 m from the centre) along +x, facing +x: all behind.
+    j["receiver"]["center"] = {0.06, 0, 0};
+    CHECK(starts_with(parse_error(j), "receiver.normal: "));
+    // Inside the edge: the last 1 cm of the surface is in front.
+    j["receiver"]["center"] = {0.04, 0, 0};
+    CHECK(parse_error(j).empty());
+    // A lens's light leaves through its back face 2 cm down: a receiver facing up from
+    // 1 cm below the surface plane still sees it.
+    j = minimal_scene();
+    j["surface"]["material"] = {{"refractive", 1.5}, {"thickness", 0.02}};
+    j["surface"]["height_bounds"] = {-0.005, 0.005};
+    j["receiver"] = {{"center", {0, 0, -0.01}}, {"normal", {0, 0, -1}}};
+    CHECK(parse_error(j).empty());
+    // Extra meshes could fold the light round to its front: not refused.
+    j = minimal_scene();
+    j["receiver"]["normal"] = {0, 0, 1};
+    j["meshes"] = {{{"file", "walls.obj"}, {"material", "mirror"}}};
+    CHECK(parse_error(j).empty());
 }
 
 TEST_CASE("values that merge_patch cannot express") {

@@ -182,6 +182,8 @@ if(GROUP STREQUAL "errors")
     design "${DATA}/target-black.json" --start-only --out out-target-black-start-only)
   expect_input_error(transport-unreachable "surface.initial"
     design "${DATA}/transport-unreachable.json" --out out-transport-unreachable)
+  expect_input_error(receiver-faces-away "receiver.normal"
+    design "${DATA}/receiver-faces-away.json" --out out-receiver-faces-away)
   expect_input_error(start-level-bad "optimise.start_level"
     design "${DATA}/start-level-bad.json" --out out-start-level-bad)
   expect_input_error(design-zero-time-budget "--time-budget"

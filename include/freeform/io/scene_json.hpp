@@ -889,6 +889,12 @@ inline DesignJob job_from_json(const nlohmann::json& j, const std::filesystem::p
     if (!s.meshes.empty() && s.trace.tracer == TracerChoice::heightfield)
         throw error("trace.tracer", "\"heightfield\" cannot trace the " + std::to_string(s.meshes.size()) +
                                         " extra mesh(es) in \"meshes\"; use \"embree\" or \"auto\"");
+    // Said now, not after a whole budget spent designing at zero energy.
+    if (s.meshes.empty() && surface_behind_receiver(s))
+        throw error("receiver.normal",
+                    "the receiver faces away from the surface: every point of the surface lies behind its "
+                    "plane, so no light can reach its front (the normal points from the receiver towards the "
+                    "surface; check receiver.center and receiver.normal)");
     return job;
 }
 

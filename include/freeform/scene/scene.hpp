@@ -167,4 +167,24 @@ inline double lens_rim(const Scene& scene) {
     return step * std::ceil(1.25 * drift / step - 1e-9);
 }
 
+// Whether every point light can leave the surface from lies behind the receiver's plane
+// (on the side its normal points away from), so that no light can reach its front: the
+// corners of the surface's body (its rectangle, a lens's rim included, from the top of
+// the height bounds down to the lowest point light leaves from: the bottom of the bounds
+// for a mirror, the back face for a lens). Extra meshes ("meshes") could fold light
+// round to the front, so the caller asks only where there are none.
+inline bool surface_behind_receiver(const Scene& scene) {
+    const SurfaceSpec& sf = scene.surface;
+    const auto* lens = std::get_if<Lens>(&sf.material);
+    const double rim = std::isfinite(lens_rim(scene)) ? lens_rim(scene) : 0.0;
+    const double hu = 0.5 * sf.size.x + rim, hv = 0.5 * sf.size.y + rim;
+    const double low = lens ? std::min(sf.h_min, -lens->thickness) : sf.h_min;
+    const Frame& r = scene.receiver.frame;
+    for (const double u : {-hu, hu})
+        for (const double v : {-hv, hv})
+            for (const double w : {low, sf.h_max})
+                if (dot(r.w, sf.frame.to_world({u, v, w}) - r.origin) > 0) return false;
+    return true;
+}
+
 }  // namespace freeform
