@@ -185,12 +185,22 @@ inline std::string what_stopped_k(const Fabrication& f) {
 // (export_blank), its rim kept at one facet pair a cell (export_rim_cells). The one
 // place that decides the mesh, so that what is written (make_fabrication) and what is
 // judged (design/exported.hpp) are the same triangles.
-inline TriangleMesh exported_mesh(const Scene& scene, const Heightmap& surface, double s, bool world_frame = true) {
+//
+// exported_mesh_over takes the top already made: `surface` itself for a mirror, the lens
+// blank with its rim `border` for a lens.
+inline TriangleMesh exported_mesh_over(const Scene& scene, const Heightmap& top, CoarseBorder border, double s,
+                                       bool world_frame) {
     const auto alpha = float(scene.surface.phong_alpha);
     if (const auto* lens = std::get_if<Lens>(&scene.surface.material))
-        return lens_solid(export_blank(scene, surface), *lens, alpha, s, world_frame,
-                          export_rim_cells(scene, surface));
-    return tessellate_surface(surface, alpha, s, world_frame);
+        return lens_solid(top, *lens, alpha, s, world_frame, border);
+    return tessellate_surface(top, alpha, s, world_frame);
+}
+
+inline TriangleMesh exported_mesh(const Scene& scene, const Heightmap& surface, double s, bool world_frame = true) {
+    if (std::holds_alternative<Lens>(scene.surface.material))
+        return exported_mesh_over(scene, export_blank(scene, surface), export_rim_cells(scene, surface), s,
+                                  world_frame);
+    return exported_mesh_over(scene, surface, {}, s, world_frame);
 }
 
 inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& options, const Heightmap& surface) {
@@ -199,13 +209,13 @@ inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& opt
     f.normal_tolerance = facet_normal_tolerance(scene, options.tolerance);
     f.automatic = options.subdivisions <= 0;
     f.max_triangles = options.max_triangles;
+    // What is exported: the surface (a mirror's sheet) or the solid over the lens blank.
+    const bool solid = std::holds_alternative<Lens>(scene.surface.material);
+    const std::optional<Heightmap> blank = solid ? std::optional<Heightmap>(export_blank(scene, surface)) : std::nullopt;
+    const Heightmap& top = blank ? *blank : surface;
+    const CoarseBorder border = export_rim_cells(scene, surface);
     if (f.automatic) {
         // The budget counts every triangle written: a lens's rim, walls and back face too.
-        const bool solid = std::holds_alternative<Lens>(scene.surface.material);
-        const std::optional<Heightmap> blank =
-            solid ? std::optional<Heightmap>(export_blank(scene, surface)) : std::nullopt;
-        const Heightmap& top = blank ? *blank : surface;
-        const CoarseBorder border = export_rim_cells(scene, surface);
         const int max_k =
             subdivisions_for_triangles(top, options.max_triangles, max_auto_subdivisions, border, solid);
         const SubdivisionChoice c = subdivisions_for_tolerance(surface, alpha, f.normal_tolerance, max_k);
@@ -226,7 +236,7 @@ inline Fabrication make_fabrication(const Scene& scene, const ExportOptions& opt
     }
     f.tolerance_met = f.normal_error <= f.normal_tolerance;
     f.capped = f.automatic && !f.tolerance_met && f.subdivisions >= double(max_auto_subdivisions);
-    f.mesh = exported_mesh(scene, surface, f.subdivisions);
+    f.mesh = exported_mesh_over(scene, top, border, f.subdivisions, true);
     return f;
 }
 

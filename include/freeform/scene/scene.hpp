@@ -176,7 +176,8 @@ inline double lens_rim(const Scene& scene) {
 inline bool surface_behind_receiver(const Scene& scene) {
     const SurfaceSpec& sf = scene.surface;
     const auto* lens = std::get_if<Lens>(&sf.material);
-    const double rim = std::isfinite(lens_rim(scene)) ? lens_rim(scene) : 0.0;
+    const double lens_body_rim = lens_rim(scene);
+    const double rim = std::isfinite(lens_body_rim) ? lens_body_rim : 0.0;
     const double hu = 0.5 * sf.size.x + rim, hv = 0.5 * sf.size.y + rim;
     const double low = lens ? std::min(sf.h_min, -lens->thickness) : sf.h_min;
     const Frame& r = scene.receiver.frame;

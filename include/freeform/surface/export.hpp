@@ -100,10 +100,14 @@ struct FineGrid {
     int ky(int cj) const { return y[std::size_t(cj) + 1] - y[std::size_t(cj)]; }
 };
 
+// The border actually kept along an axis of n vertices: none where it would leave no
+// cell inside it.
+inline int border_cells(int n, int border) { return border < 0 || 2 * border >= n - 1 ? 0 : border; }
+
 inline void fine_lines(int n, double s, std::vector<int>& start, std::vector<int>& cell, int border = 0) {
     start.resize(std::size_t(n));
     // The first and last `border` cells get one sub-cell each (CoarseBorder).
-    if (border < 0 || 2 * border >= n - 1) border = 0;
+    border = border_cells(n, border);
     const int last = n - 1 - border;  // the line where the far border starts
     for (int c = 0; c < n; ++c)
         start[std::size_t(c)] = c <= border ? c
@@ -134,10 +138,17 @@ namespace detail {
 
 // The active cells that `border` leaves at whatever level the tessellation has.
 inline std::int64_t cells_inside_border(const Heightmap& hm, CoarseBorder border) {
+    const int bu = border_cells(hm.nx(), border.u), bv = border_cells(hm.ny(), border.v);
     std::int64_t cells = 0;
-    for (int j = border.v; j + 1 + border.v < hm.ny(); ++j)
-        for (int i = border.u; i + 1 + border.u < hm.nx(); ++i) cells += hm.cell_active(i, j) ? 1 : 0;
+    for (int j = bv; j + 1 + bv < hm.ny(); ++j)
+        for (int i = bu; i + 1 + bu < hm.nx(); ++i) cells += hm.cell_active(i, j) ? 1 : 0;
     return cells;
+}
+
+// Whether cell (ci, cj) exists and is active: outside the grid counts as missing (the
+// outline of a lens solid, LensClosure).
+inline bool cell_present(const Heightmap& hm, int ci, int cj) {
+    return ci >= 0 && cj >= 0 && ci < hm.nx() - 1 && cj < hm.ny() - 1 && hm.cell_active(ci, cj);
 }
 
 inline FineGrid fine_grid(const Heightmap& hm, double s, CoarseBorder border = {}) {
@@ -460,9 +471,7 @@ TriangleMesh lens_solid_of(const Heightmap& hm, const Lens& lens, double subdivi
     if (!front_normals) mesh.normals.clear();
     detail::check_lens_clearance(t, mesh, mesh.vertices.size());
 
-    const auto active = [&](int ci, int cj) {
-        return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
-    };
+    const auto active = [&](int ci, int cj) { return detail::cell_present(hm, ci, cj); };
     detail::LensClosure closure(mesh, fine_index, g, t, front_normals);
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
@@ -497,9 +506,7 @@ inline TriangleMesh lens_solid(const Heightmap& hm, const Lens& lens, float phon
 // of the cell is on the outline (detail::LensClosure).
 inline std::int64_t export_triangle_count(const Heightmap& hm, const detail::FineGrid& g, bool solid) {
     const int nx = hm.nx(), ny = hm.ny();
-    const auto active = [&](int ci, int cj) {
-        return ci >= 0 && cj >= 0 && ci < nx - 1 && cj < ny - 1 && hm.cell_active(ci, cj);
-    };
+    const auto active = [&](int ci, int cj) { return detail::cell_present(hm, ci, cj); };
     std::int64_t t = 0;
     for (int cj = 0; cj + 1 < ny; ++cj)
         for (int ci = 0; ci + 1 < nx; ++ci) {
