@@ -158,12 +158,18 @@ freeform::TargetSpec array_target_spec(const freeform::ImageD& img) {
     return t;
 }
 
-// A target array made the scene's target: recorded as given, and brought up to the
-// receiver as io::load_target_image brings up a file.
-freeform::ImageD array_target(const py::handle& obj, freeform::Scene& scene) {
+// A target array made the scene's target: recorded as given, and framed and brought up
+// to the receiver as io::load_target_image does a file (the scene's target.fit and
+// target.upsample, where it has an image target, apply to the array too).
+freeform::io::LoadedTarget array_target(const py::handle& obj, freeform::Scene& scene) {
     const freeform::ImageD raw = target_from_array(obj);
-    scene.target = array_target_spec(raw);
-    return freeform::upsample_linear(raw, scene.receiver.width, scene.receiver.height);
+    freeform::TargetSpec spec = array_target_spec(raw);
+    if (scene.target && !scene.target->image.empty()) {
+        spec.fit = scene.target->fit;
+        spec.upsample = scene.target->upsample;
+    }
+    scene.target = spec;
+    return freeform::io::picture_target(raw, scene);
 }
 
 // The height map of an array, row 0 the surface's +v edge (as heightmap.pfm, Design.heightmap).
@@ -388,7 +394,7 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
                                        std::to_string(*threads));
         options.threads = *threads;
     }
-    std::optional<freeform::ImageD> target;
+    std::optional<freeform::io::LoadedTarget> target;
     if (!target_arg.is_none()) {
         target = array_target(target_arg, scene);
     }
@@ -404,7 +410,7 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     std::vector<freeform::LevelPlan> levels = freeform::plan_levels(scene, options);
     freeform::check_resources(job, freeform::RunKind::design,
                               freeform::thread_count(freeform::exec::omp_t{options.threads}), limits, &levels);
-    if (!target) target = freeform::io::load_target_image(scene, limits);
+    if (!target) target = freeform::io::load_target(scene, limits);
     const std::vector<freeform::ExportFormat> formats = freeform::io::export_formats(options.exports);
     std::optional<freeform::Heightmap> start = freeform::io::load_start_surface(scene, levels, limits);
     freeform::PlannedDesign plan = freeform::plan_design(job, std::move(start), std::move(levels));
@@ -418,12 +424,13 @@ PyDesign design(const PyScene& ps, const py::object& target_arg, std::optional<d
     {
         py::gil_scoped_release released;
         setup.callbacks.progress = [&](const freeform::DesignProgress& p) { return state.report(p); };
-        done = freeform::design(std::move(plan), *target, setup);
+        done = freeform::design(std::move(plan), target->image, setup);
         json m = freeform::io::design_metrics_json(*done);
         m["command"] = "design";
         m["scene"] = ps.path ? json(*ps.path) : json(nullptr);
+        m["target_fit"] = freeform::io::target_fit_json(done->scene, *target);
         const ScratchFolder scratch;
-        images = freeform::io::write_design_outputs(scratch.path(), m, *done, *target, formats);
+        images = freeform::io::write_design_outputs(scratch.path(), m, *done, target->image, formats);
         files = read_folder(scratch.path());
     }
     const freeform::CompletedDesign& d = *done;
@@ -474,7 +481,7 @@ py::tuple render(const PyScene& ps, const py::object& heightmap, const py::objec
     job.tracer = scene.trace.tracer;
     freeform::choose_tracer(scene, !mesh.is_none(), job.tracer, freeform::embree_available);
     if (!target_arg.is_none()) {
-        job.target = array_target(target_arg, scene);
+        job.target = array_target(target_arg, scene).image;
     } else if (scene.target) {
         job.target = freeform::io::load_target_image(scene, limits);
     }

@@ -27,6 +27,7 @@ using freeform::ImageF;
 using freeform::InputError;
 using freeform::Scene;
 using freeform::TargetSpec;
+using freeform::TargetFit;
 using freeform::TargetUpsample;
 using freeform::IoError;
 using freeform::TriangleMesh;
@@ -142,6 +143,58 @@ TEST_CASE("load_target_image brings a coarse image up to the receiver smoothly, 
     const ImageD blocks = io::load_target_image(scene);
     REQUIRE(blocks.cols() == 3);  // as stored: make_target area-averages it (blocks of 4)
     CHECK(blocks(0, 1) == 2.0);
+}
+
+TEST_CASE("target.fit: a disc on a 4:3 picture stays round on a square receiver with contain and cover") {
+    // The picture: a bright disc of radius 5 pixels in the middle of a 40 x 30 canvas.
+    TempDir dir;
+    ImageF img(30, 40);
+    for (int y = 0; y < 30; ++y)
+        for (int x = 0; x < 40; ++x) img(y, x) = std::hypot(x + 0.5 - 20.0, y + 0.5 - 15.0) < 5.0 ? 1.0f : 0.0f;
+    const fs::path file = dir / "disc.pfm";
+    io::write_pfm(file, img);
+    Scene scene;
+    scene.receiver.width = scene.receiver.height = 60;  // 0.2 x 0.2 m
+    scene.target = TargetSpec{};
+    scene.target->image = file;
+    // The spread of the light along each receiver axis, in metres: its second moment about
+    // its centroid, from the fixed-point target a level is fitted to.
+    auto spreads = [&](const ImageD& image) {
+        const freeform::Target t = freeform::make_target(image, 60, 60, freeform::Fixed(1) << 40);
+        double m = 0, mx = 0, my = 0, mxx = 0, myy = 0;
+        for (int y = 0; y < 60; ++y)
+            for (int x = 0; x < 60; ++x) {
+                const double w = double(t.cells[std::size_t(y * 60 + x)]);
+                const double px = (x + 0.5) / 60 * 0.2, py = (y + 0.5) / 60 * 0.2;
+                m += w, mx += w * px, my += w * py, mxx += w * px * px, myy += w * py * py;
+            }
+        mx /= m, my /= m;
+        CHECK(mx == doctest::Approx(0.1).epsilon(1e-9));  // centred
+        CHECK(my == doctest::Approx(0.1).epsilon(1e-9));
+        return std::pair{std::sqrt(mxx / m - mx * mx), std::sqrt(myy / m - my * my)};
+    };
+    const io::LoadedTarget stretched = io::load_target(scene);
+    CHECK(stretched.picture_width == 40);
+    CHECK(stretched.picture_height == 30);
+    CHECK(stretched.stretch == doctest::Approx(4.0 / 3.0));
+    const auto [sx, sy] = spreads(stretched.image);
+    CHECK(sy / sx == doctest::Approx(4.0 / 3.0).epsilon(0.03));  // an upright ellipse
+    scene.target->fit = TargetFit::contain;
+    const io::LoadedTarget contained = io::load_target(scene);
+    CHECK(contained.stretch == 1.0);
+    const auto [cx, cy] = spreads(contained.image);
+    CHECK(cy / cx == doctest::Approx(1.0).epsilon(0.01));  // round again
+    // The disc, 10 of the picture's 40 pixels wide, spans a quarter of the receiver's width.
+    CHECK(cx == doctest::Approx(sx).epsilon(0.01));
+    scene.target->fit = TargetFit::cover;
+    const auto [kx, ky] = spreads(io::load_target(scene).image);
+    CHECK(ky / kx == doctest::Approx(1.0).epsilon(0.01));
+    CHECK(kx == doctest::Approx(4.0 / 3.0 * cx).epsilon(0.01));  // a third of a picture 30 wide
+    // contain past limits.pixels is refused, naming target.fit.
+    scene.target->fit = TargetFit::contain;
+    freeform::Limits small;
+    small.pixels = 40 * 30 + 10;  // the picture fits; padded to 40 x 40, it does not
+    CHECK_THROWS_WITH_AS(io::load_target(scene, small), doctest::Contains("target.fit"), InputError);
 }
 
 TEST_CASE("PFM reader: RGB averaged to grey, big-endian data, .pfm via read_image_grey") {

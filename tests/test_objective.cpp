@@ -374,6 +374,50 @@ TEST_CASE("area resampling preserves the mean and constants, for any ratio") {
     CHECK(half(0, 1) == doctest::Approx(4.0));
 }
 
+TEST_CASE("frame_to_aspect pads (contain) or trims (cover) whole pixel pairs, centred, and stretch keeps all") {
+    const ImageD img = random_image(24, 18, 3) + 0.5;  // 24 wide, 18 tall: aspect 4:3, no zero pixel
+    SUBCASE("a wide picture on a square receiver") {
+        const ImageD contain = frame_to_aspect(img, 1.0, TargetFit::contain);
+        REQUIRE(contain.cols() == 24);
+        REQUIRE(contain.rows() == 24);  // 3 dark rows above, 3 below
+        CHECK(contain.topRows(3).abs().maxCoeff() == 0.0);
+        CHECK(contain.bottomRows(3).abs().maxCoeff() == 0.0);
+        CHECK((contain.middleRows(3, 18) - img).abs().maxCoeff() == 0.0);
+        const ImageD cover = frame_to_aspect(img, 1.0, TargetFit::cover);
+        REQUIRE(cover.rows() == 18);
+        REQUIRE(cover.cols() == 18);  // 3 columns off each side
+        CHECK((cover - img.middleCols(3, 18)).abs().maxCoeff() == 0.0);
+        CHECK((frame_to_aspect(img, 1.0, TargetFit::stretch) - img).abs().maxCoeff() == 0.0);
+        CHECK(aspect_stretch(24, 18, 1.0) == doctest::Approx(4.0 / 3.0));
+    }
+    SUBCASE("a wide picture on a wider receiver: columns added, rows cut") {
+        const ImageD contain = frame_to_aspect(img, 2.0, TargetFit::contain);  // wants 36 x 18
+        REQUIRE(contain.rows() == 18);
+        REQUIRE(contain.cols() == 36);
+        CHECK((contain.middleCols(6, 24) - img).abs().maxCoeff() == 0.0);
+        CHECK(contain.leftCols(6).abs().maxCoeff() == 0.0);
+        const ImageD cover = frame_to_aspect(img, 2.0, TargetFit::cover);  // wants 24 x 12
+        REQUIRE(cover.cols() == 24);
+        REQUIRE(cover.rows() == 12);
+        CHECK((cover - img.middleRows(3, 12)).abs().maxCoeff() == 0.0);
+        CHECK(aspect_stretch(24, 18, 2.0) == doctest::Approx(1.5));
+    }
+    SUBCASE("the same aspect ratio, an odd difference, an extreme receiver") {
+        CHECK((frame_to_aspect(img, 24.0 / 18.0, TargetFit::contain) - img).abs().maxCoeff() == 0.0);
+        CHECK((frame_to_aspect(img, 24.0 / 18.0, TargetFit::cover) - img).abs().maxCoeff() == 0.0);
+        // 5 x 3 on a square: one row a side (5 x 5), or one column a side (3 x 3): the
+        // same on both sides, whatever the rounding, so the picture stays centred.
+        const ImageD small = random_image(5, 3, 4) + 0.5;
+        CHECK(frame_to_aspect(small, 1.0, TargetFit::contain).rows() == 5);
+        CHECK(frame_to_aspect(small, 1.0, TargetFit::cover).cols() == 3);
+        // A receiver a thousand times taller than wide: cover keeps at least a pixel.
+        const ImageD thin = frame_to_aspect(img, 1e-3, TargetFit::cover);
+        CHECK(thin.rows() == 18);
+        CHECK(thin.cols() == 2);
+        CHECK((thin - img.middleCols(11, 2)).abs().maxCoeff() == 0.0);
+    }
+}
+
 TEST_CASE("upsampling reproduces a linear picture exactly and keeps axes that have enough pixels") {
     // Pixel k of a ramp holds the picture's value at its centre, k + ½ (in pixel units).
     // The linear reconstruction of a ramp is the ramp itself between the first and last

@@ -203,6 +203,12 @@ TEST_CASE("other light types, a PFM initial surface and an image target") {
     CHECK(s.light.rays == 100);
     CHECK(s.surface.initial_pfm == fs::path("/base/start/h.PFM"));
     CHECK(s.target->image == fs::path("/base/E.png"));
+    CHECK(s.target->fit == freeform::TargetFit::stretch);  // the default
+    j["target"]["fit"] = "contain";
+    CHECK(scene_from_json(j, "/base").target->fit == freeform::TargetFit::contain);
+    j["target"]["fit"] = "cover";
+    CHECK(scene_from_json(j, "/base").target->fit == freeform::TargetFit::cover);
+    j["target"].erase("fit");
 
     j["light"] = json::parse(R"({"type": "disk", "center": [0, 0, 0.4], "radius": 0.003})");
     s = scene_from_json(j);
@@ -375,6 +381,8 @@ TEST_CASE("every class of bad input throws InputError naming the key") {
         {"empty image path", {{"target", {{"image", ""}}}}, "target.image: ", "empty"},
         {"bad upsample", {{"target", {{"image", "E.png"}, {"upsample", "cubic"}}}}, "target.upsample: ", "\"box\""},
         {"upsample with text", {{"target", {{"text", "E"}, {"upsample", "box"}}}}, "target.upsample: ", "image target"},
+        {"bad fit", {{"target", {{"image", "E.png"}, {"fit", "fill"}}}}, "target.fit: ", "\"contain\""},
+        {"fit with text", {{"target", {{"text", "E"}, {"fit", "cover"}}}}, "target.fit: ", "image target"},
         {"meshes not array", {{"meshes", {{"file", "a.obj"}}}}, "meshes: ", "expected an array"},
         {"mesh entry not object", {{"meshes", {1}}}, "meshes[0]: ", "expected an object"},
         {"mesh without file", {{"meshes", {{{"material", "mirror"}}}}}, "meshes[0].file: ", "missing required key"},
@@ -646,7 +654,7 @@ TEST_CASE("scene_to_json writes every default and reads back to the same JSON") 
         json::parse(R"({"light": {"type": "point", "position": [0.01, 0, 0.3], "profile": [[0, 1], [80, 0.25]]},
                         "surface": {"normal": [0, -0.5, 1], "up": [0.3, 1, 0.2], "initial": "h.pfm"},
                         "receiver": {"center": [0.1, 0.2, 0.6], "normal": [0.1, 0.1, -1]},
-                        "target": {"image": "E.png"}})"),
+                        "target": {"image": "E.png", "fit": "cover"}})"),
         json::parse(R"({"light": {"type": "disk", "center": [0, 0, 0.3], "normal": [0, 0.2, -1], "radius": 0.004,
                                   "rays": 77}, "surface": {}, "receiver": {}, "target": {"text": "E"}})")};
     for (const json& j : scenes) {

@@ -257,6 +257,16 @@ void write_render_outputs(const fs::path& out, const json& m, const Histogram& r
     staged.commit("metrics.json");
 }
 
+// The line that says a picture was stretched by more than 1% to fill the receiver, empty
+// when it was not (docs/scene.md, target.fit).
+std::string target_stretch_text(const Scene& scene, const io::LoadedTarget& t) {
+    if (!(t.stretch > 1.01)) return {};
+    return "target: the picture (" + std::to_string(t.picture_width) + " x " + std::to_string(t.picture_height) +
+           " pixels) is stretched " + fixed(t.stretch, 2) + " times to fill the receiver (" +
+           fixed(scene.receiver.size.x, 3) + " x " + fixed(scene.receiver.size.y, 3) +
+           " m); target.fit \"contain\" keeps its shape with dark bars, \"cover\" crops it";
+}
+
 // What `freeform render` traces, read from the files the arguments name: the scene, the
 // surface (a heightmap, or the scene's start; the grid that places the rays when a mesh
 // replaces it), the meshes, and the target.
@@ -280,7 +290,12 @@ RenderRequest render_request(const RenderArgs& a, const Limits& limits) {
     choose_tracer(scene, !a.mesh.empty(), job.tracer, embree_available);  // refuses before any reading
     if (a.mesh_normals && a.mesh.empty() && scene.meshes.empty())
         throw InputError("--mesh-normals: the scene has no mesh to shade (give --mesh or meshes[])");
-    if (scene.target) job.target = io::load_target_image(scene, limits);
+    if (scene.target) {
+        const io::LoadedTarget target = io::load_target(scene, limits);
+        if (const std::string note = target_stretch_text(scene, target); !note.empty())
+            std::fprintf(stderr, "freeform: warning: %s\n", note.c_str());
+        job.target = target.image;
+    }
     if (!a.heightmap.empty()) {
         try {
             job.surface = io::read_heightmap(scene, a.heightmap, limits);
@@ -438,7 +453,8 @@ void print_forms(const CompletedDesign& d, const json& m) {
 
 // The summary a design prints (always, --quiet or not): error_physical first, then the
 // diagnostics, the machining figures, the start and where the results are.
-void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out, double writing_seconds) {
+void print_design_summary(const CompletedDesign& d, const json& m, const fs::path& out, double writing_seconds,
+                          const std::string& target_note) {
     const DesignResult& result = d.result;
     const double error = d.fitted.error, energy = d.fitted.totals.energy();
     const std::optional<double>& error_held_out = d.error_held_out;
@@ -459,6 +475,7 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                     result.device_failure.c_str());
     // A level the budget could not afford (design/designer.hpp, trace_affordable): say so.
     if (!result.start.left_out.empty()) std::printf("  time budget: %s\n", result.start.left_out.c_str());
+    if (!target_note.empty()) std::printf("  %s\n", target_note.c_str());
     print_forms(d, m);
     std::printf("  diagnostics: fitted error %.4f, energy %.4f", error, energy);
     if (error_held_out) std::printf("; held-out rays %.4f", *error_held_out);
@@ -628,23 +645,25 @@ DesignRun design_run(const DesignArgs& a, PlannedDesign plan, const ImageD& targ
 }
 
 // metrics.json, the files, and the summary of a finished design.
-void write_design(const DesignArgs& a, const CompletedDesign& d, const json& replicas, const ImageD& target,
+void write_design(const DesignArgs& a, const CompletedDesign& d, const json& replicas, const io::LoadedTarget& target,
                   const std::vector<ExportFormat>& formats, DesignMonitor& monitor) {
     json m = io::design_metrics_json(d);
     m["command"] = "design";
     m["scene"] = a.scene.string();
+    m["target_fit"] = io::target_fit_json(d.scene, target);
     if (!replicas.is_null()) m["replicas"] = replicas;
     // Keep catching Ctrl-C until the results are written: a second one must not leave
     // half-written files (each file is written atomically, but the set should be whole).
     StatusLine& status = monitor.status();
     if (!monitor.quiet()) status.show("writing the results");
     const auto writing = std::chrono::steady_clock::now();
-    io::write_design_outputs(a.out, m, d, target, formats, [&](const std::string& what) {
+    io::write_design_outputs(a.out, m, d, target.image, formats, [&](const std::string& what) {
         if (!monitor.quiet()) status.show(what);
     });
     status.finish();
     print_design_summary(d, m, a.out,
-                         std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count());
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count(),
+                         target_stretch_text(d.scene, target));
 }
 
 // `freeform design`: everything is read and checked before the design starts.
@@ -665,7 +684,10 @@ int run_design(const DesignArgs& a) {
     // start surface's mesh and the design read the same levels.
     std::vector<LevelPlan> levels = plan_levels(scene, job.options);
     check_resources(job, RunKind::design, thread_count(exec::omp_t{job.options.threads}), limits, &levels);
-    const ImageD target = io::load_target_image(scene, limits);
+    const io::LoadedTarget target = io::load_target(scene, limits);
+    // Said before the design too, so that a user can stop it and frame the picture.
+    if (const std::string note = target_stretch_text(scene, target); !note.empty() && !a.quiet && world_rank == 0)
+        std::fprintf(stderr, "freeform: warning: %s\n", note.c_str());
     // A format this build lacks: exit 2 now.
     const std::vector<ExportFormat> formats = io::export_formats(job.options.exports);
     std::optional<Heightmap> start = io::load_start_surface(scene, levels, limits);
@@ -675,7 +697,7 @@ int run_design(const DesignArgs& a) {
     std::signal(SIGINT, on_sigint);
     DesignMonitor monitor(a, plan, device);
     setup.callbacks = monitor.callbacks();
-    DesignRun run = design_run(a, std::move(plan), target, std::move(setup), monitor);
+    DesignRun run = design_run(a, std::move(plan), target.image, std::move(setup), monitor);
     // Another MPI rank: rank 0 writes the winner's design.
     if (!run.design) return run.stopped_early ? 130 : 0;
     monitor.status().finish();

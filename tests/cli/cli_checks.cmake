@@ -440,6 +440,29 @@ elseif(GROUP STREQUAL "design")
     endif()
   endif()
 
+  # A picture of another aspect ratio than the receiver's (target.fit "stretch"): said on
+  # stderr before the design, in the summary (printed under --quiet too) and in metrics.json.
+  run(design-stretched design "${DATA}/wide-target.json" --start-only --out stretched)
+  set(stretch_text "the picture (6 x 4 pixels) is stretched 1.50 times")
+  string(FIND "${err}" "warning: target: ${stretch_text}" warned)
+  string(FIND "${out}" "  target: ${stretch_text}" summarised)
+  if(NOT rc STREQUAL "0" OR warned EQUAL -1 OR summarised EQUAL -1)
+    fail("design of a stretched picture: exit code ${rc}, expected the warning on stderr and in the summary "
+         "(stdout: ${out}; stderr: ${err})")
+  endif()
+  if(EXISTS "${WORK}/stretched/metrics.json")
+    file(READ "${WORK}/stretched/metrics.json" text)
+    string(JSON stretch ERROR_VARIABLE e GET "${text}" target_fit stretch)
+    if(e OR NOT stretch EQUAL 1.5)
+      fail("design of a stretched picture: metrics.json target_fit.stretch '${stretch}' ${e}, expected 1.5")
+    endif()
+  endif()
+  run(render-stretched render "${DATA}/wide-target.json" --out stretched-render --threads 1)
+  string(FIND "${err}" "warning: target: ${stretch_text}" warned)
+  if(NOT rc STREQUAL "0" OR warned EQUAL -1)
+    fail("render of a stretched picture: exit code ${rc}, expected the warning on stderr: ${err}")
+  endif()
+
   # The seed makes the run: two threads give the same surface and irradiance.
   run(design-2 design "${DATA}/design-tiny.json" --out design2 --threads 2 --quiet)
   if(NOT rc STREQUAL "0")

@@ -103,7 +103,9 @@ def test_target_array_is_designed_as_the_same_image_file(ff, tmp_path):
     assert np.array_equal(d.irradiance.astype(np.float32), read_pfm(tmp_path / "cli" / "irradiance.pfm"))
     assert d.target.shape == (32, 32)
     cli = load_json(tmp_path / "cli" / "metrics.json")
-    assert d.metrics["effective_scene"]["target"] == {"image": "(NumPy array, 48 x 20)", "upsample": "bilinear"}
+    assert d.metrics["effective_scene"]["target"] == {"image": "(NumPy array, 48 x 20)", "upsample": "bilinear",
+                                                     "fit": "stretch"}
+    assert d.metrics["target_fit"] == {"picture": [48, 20], "fit": "stretch", "stretch": 2.4}
     for m in (cli, d.metrics):
         del m["effective_scene"]["target"], m["scene"]
     assert without_timings(d.metrics) == without_timings(cli)

@@ -517,7 +517,7 @@ inline Light read_light(const json& j, const SurfaceSpec& surface) {
 
 inline TargetSpec read_target(const json& j, const std::filesystem::path& base) {
     const Object o(j, "target");
-    static constexpr std::array<std::string_view, 5> keys{"image", "text", "font", "margin", "upsample"};
+    static constexpr std::array<std::string_view, 6> keys{"image", "text", "font", "margin", "upsample", "fit"};
     o.only(keys);
     const json* image = o.find("image");
     const json* text = o.find("text");
@@ -529,9 +529,11 @@ inline TargetSpec read_target(const json& j, const std::filesystem::path& base) 
             if (o.find(k)) throw error(o.at(k), "only applies to a text target (target.text)");
         t.image = file_path(*image, o.at("image"), base);
         if (const json* v = o.find("upsample")) t.upsample = enumeration(*v, o.at("upsample"), target_upsample_names);
+        if (const json* v = o.find("fit")) t.fit = enumeration(*v, o.at("fit"), target_fit_names);
         return t;
     }
-    if (o.find("upsample")) throw error(o.at("upsample"), "only applies to an image target (target.image)");
+    for (std::string_view k : {"upsample", "fit"})
+        if (o.find(k)) throw error(o.at(k), "only applies to an image target (target.image)");
     t.text = string_value(*text, o.at("text"));
     if (t.text.empty()) throw error(o.at("text"), "must not be empty");
     if (const json* v = o.find("font")) {
@@ -985,7 +987,8 @@ inline nlohmann::json scene_to_json(const Scene& s) {
     if (s.target) {
         if (!s.target->image.empty())
             out["target"] = json{{"image", s.target->image.string()},
-                                 {"upsample", enum_name(s.target->upsample, target_upsample_names)}};
+                                 {"upsample", enum_name(s.target->upsample, target_upsample_names)},
+                                 {"fit", enum_name(s.target->fit, target_fit_names)}};
         else
             out["target"] = json{{"text", s.target->text}, {"font", s.target->font}, {"margin", s.target->margin}};
     }

@@ -1,8 +1,12 @@
 #pragma once
 // Loading a scene's target as a relative-irradiance image.
 #include <algorithm>
+#include <cstdint>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
+#include "../core/enum_names.hpp"
 #include "../core/error.hpp"
 #include "../core/histogram.hpp"
 #include "../core/limits.hpp"
@@ -13,13 +17,48 @@
 
 namespace freeform::io {
 
+// A scene's target as loaded: the image the design fits, and for an image file the size
+// of the picture as stored (0 × 0 for text), which the summary and metrics.json use to say
+// how it was laid on the receiver (target.fit).
+struct LoadedTarget {
+    ImageD image;
+    int picture_width = 0, picture_height = 0;
+    // How much the picture was stretched to fill the receiver (aspect_stretch; 1: not
+    // at all, or framed by target.fit "contain" or "cover", or text).
+    double stretch = 1.0;
+};
+
+// A picture (relative irradiance, checked) made the target of `scene`'s receiver as its
+// target block says (objective/target.hpp, target_for_receiver), with what is recorded of
+// how it was laid on the receiver. The Python module's arrays come through here too.
+inline LoadedTarget picture_target(const ImageD& picture, const Scene& scene) {
+    LoadedTarget loaded;
+    loaded.picture_width = int(picture.cols());
+    loaded.picture_height = int(picture.rows());
+    if (!scene.target || scene.target->fit == TargetFit::stretch)
+        loaded.stretch = aspect_stretch(picture.cols(), picture.rows(), scene.receiver.size.x / scene.receiver.size.y);
+    loaded.image = target_for_receiver(picture, scene);
+    return loaded;
+}
+
+// What metrics.json records of how an image target was laid on the receiver (`target_fit`,
+// docs/cli.md; null for text).
+inline nlohmann::json target_fit_json(const Scene& scene, const LoadedTarget& t) {
+    if (t.picture_width == 0) return nullptr;
+    const TargetFit fit = scene.target ? scene.target->fit : TargetFit::stretch;
+    return nlohmann::json{{"picture", nlohmann::json::array({t.picture_width, t.picture_height})},
+                          {"fit", enum_name(fit, target_fit_names)},
+                          {"stretch", t.stretch}};
+}
+
 // The target of `scene` at a resolution fine enough for its receiver: an image file as
-// stored (grey levels are relative irradiance; a PFM is taken linearly), brought up to the
-// receiver's pixel count along an axis where it has fewer (target.upsample: the linear
-// reconstruction by default, objective/target.hpp upsample_linear), or text rendered at
-// 4x the receiver resolution so that area resampling anti-aliases its edges.
-// limits.data_file_bytes and limits.pixels bound the image file.
-inline ImageD load_target_image(const Scene& scene, const Limits& limits = {}) {
+// stored (grey levels are relative irradiance; a PFM is taken linearly), framed to the
+// receiver's aspect ratio as target.fit says and brought up to the receiver's pixel count
+// along an axis where it has fewer (objective/target.hpp, target_for_receiver), or text
+// rendered at 4x the receiver resolution so that area resampling anti-aliases its edges.
+// limits.data_file_bytes and limits.pixels bound the image file, and limits.pixels the
+// framed picture.
+inline LoadedTarget load_target(const Scene& scene, const Limits& limits = {}) {
     if (!scene.target) throw InputError("target: the scene has no target (add a \"target\" block)");
     const TargetSpec& t = *scene.target;
     ImageF img;
@@ -37,9 +76,21 @@ inline ImageD load_target_image(const Scene& scene, const Limits& limits = {}) {
     if (!out.isFinite().all()) throw InputError("target.image: " + t.image.string() + " has non-finite values");
     if ((out < 0).any()) throw InputError("target.image: " + t.image.string() + " has negative values");
     if (!(out.sum() > 0)) throw InputError("target: " + (t.text.empty() ? t.image.string() : "the text") + " is entirely black");
-    if (t.text.empty() && t.upsample == TargetUpsample::bilinear)
-        return upsample_linear(out, scene.receiver.width, scene.receiver.height);
-    return out;
+    if (!t.text.empty()) return {out, 0, 0, 1.0};
+    if (t.fit == TargetFit::contain) {
+        const ImageD framed = frame_to_aspect(out, scene.receiver.size.x / scene.receiver.size.y, t.fit);
+        if (std::uint64_t(framed.size()) > limits.pixels)
+            throw InputError("target.fit: \"contain\" pads " + t.image.string() + " to " +
+                             std::to_string(framed.cols()) + " x " + std::to_string(framed.rows()) +
+                             " pixels, over the limit of " + std::to_string(limits.pixels) +
+                             " (--limit pixels=N raises it)");
+    }
+    return picture_target(out, scene);
+}
+
+// The target image alone (load_target).
+inline ImageD load_target_image(const Scene& scene, const Limits& limits = {}) {
+    return load_target(scene, limits).image;
 }
 
 }  // namespace freeform::io

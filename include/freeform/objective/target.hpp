@@ -21,6 +21,7 @@
 #include "../core/error.hpp"
 #include "../core/fixed_point.hpp"
 #include "../core/histogram.hpp"
+#include "../scene/scene.hpp"
 
 namespace freeform {
 
@@ -123,6 +124,56 @@ inline ImageD upsample_linear(const ImageD& img, int w, int h) {
         return t;
     };
     return widen(widen(img, w).transpose(), h).transpose();
+}
+
+// How much a picture of w × h square pixels is stretched when it fills a receiver whose
+// width / height (metres) is `aspect`: the larger ratio of the two aspect ratios (1: not at all).
+inline double aspect_stretch(Eigen::Index w, Eigen::Index h, double aspect) {
+    const double own = double(w) / double(h);
+    return std::max(own / aspect, aspect / own);
+}
+
+// A picture laid on a receiver whose width / height (metres) is `aspect`, its pixels taken
+// as square (docs/scene.md, target.fit). `stretch` leaves it as it is: make_target maps the
+// whole picture onto the whole receiver, stretching it where the aspect ratios differ.
+// `contain` adds dark rows (or columns) on two opposite sides, `cover` cuts them off, so
+// that the picture keeps its shape. The same number go on (or come off) each side, whole
+// pixels, so the picture stays exactly centred and its own pixels are not resampled; the
+// framed aspect ratio is within one pixel pair of the receiver's.
+inline ImageD frame_to_aspect(const ImageD& img, double aspect, TargetFit fit) {
+    const Eigen::Index w = img.cols(), h = img.rows();
+    if (fit == TargetFit::stretch || w == 0 || h == 0 || !(aspect > 0)) return img;
+    const bool wider = double(w) / double(h) > aspect;
+    // contain pads the short axis, cover trims the long one.
+    const bool rows = (fit == TargetFit::contain) == wider;
+    const Eigen::Index have = rows ? h : w;
+    const double want = rows ? double(w) / aspect : double(h) * aspect;
+    // Per side: > 0 adds, < 0 removes; at least one pixel is kept.
+    const Eigen::Index side = std::max<Eigen::Index>(std::llround((want - double(have)) / 2.0), -(have - 1) / 2);
+    if (side == 0) return img;
+    const Eigen::Index n = have + 2 * side;
+    if (rows) {
+        if (side < 0) return img.middleRows(-side, n);
+        ImageD out = ImageD::Zero(n, w);
+        out.middleRows(side, h) = img;
+        return out;
+    }
+    if (side < 0) return img.middleCols(-side, n);
+    ImageD out = ImageD::Zero(h, n);
+    out.middleCols(side, w) = img;
+    return out;
+}
+
+// A picture (relative irradiance, any size) made the target of `scene`'s receiver: framed
+// to its aspect ratio as target.fit says, then brought up to its pixel count along an axis
+// where it has fewer (target.upsample). io::load_target_image and the Python module's
+// arrays both come through here.
+inline ImageD target_for_receiver(const ImageD& picture, const Scene& scene) {
+    const TargetSpec spec = scene.target ? *scene.target : TargetSpec{};
+    const Receiver& r = scene.receiver;
+    ImageD framed = frame_to_aspect(picture, r.size.x / r.size.y, spec.fit);
+    if (spec.upsample == TargetUpsample::bilinear) return upsample_linear(framed, r.width, r.height);
+    return framed;
 }
 
 // Builds the fixed-point target of one level from a relative-irradiance image.

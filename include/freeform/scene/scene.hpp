@@ -59,9 +59,17 @@ enum class TargetUpsample { bilinear, box };
 inline constexpr std::array<EnumName<TargetUpsample>, 2> target_upsample_names{
     {{"bilinear", TargetUpsample::bilinear}, {"box", TargetUpsample::box}}};
 
+// How a picture whose aspect ratio differs from the receiver's is laid on it
+// (objective/target.hpp, frame_to_aspect): stretched to fill it, kept whole with dark
+// bars, or cropped to fill it.
+enum class TargetFit { stretch, contain, cover };
+inline constexpr std::array<EnumName<TargetFit>, 3> target_fit_names{
+    {{"stretch", TargetFit::stretch}, {"contain", TargetFit::contain}, {"cover", TargetFit::cover}}};
+
 struct TargetSpec {
     std::filesystem::path image;  // PNG/JPG/... or PFM, grey levels are relative irradiance
     TargetUpsample upsample = TargetUpsample::bilinear;  // an image coarser than the receiver
+    TargetFit fit = TargetFit::stretch;                  // an image of another aspect ratio
     std::string text;             // or a text rendered with a TrueType font
     std::string font = "DejaVuSans-Bold";
     double margin = 0.1;  // fraction of the receiver left dark around the text
