@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <freeform/io.hpp>
+#include <freeform/io/outputs.hpp>
 
 #include <algorithm>
 #include <bit>
@@ -195,6 +196,53 @@ TEST_CASE("target.fit: a disc on a 4:3 picture stays round on a square receiver 
     freeform::Limits small;
     small.pixels = 40 * 30 + 10;  // the picture fits; padded to 40 x 40, it does not
     CHECK_THROWS_WITH_AS(io::load_target(scene, small), doctest::Contains("target.fit"), InputError);
+}
+
+TEST_CASE("text keeps its shape on a receiver whose pixels are not square, and the PNGs show it so") {
+    // The same text on a 0.3 x 0.2 m receiver with 300 x 200 square pixels and with 200 x 200
+    // pixels 1.5 mm wide and 1 mm tall: the light's spread along each axis, in metres, is the same.
+    Scene scene;
+    scene.receiver.size = {0.3, 0.2};
+    scene.target = TargetSpec{};
+    scene.target->text = "O";
+    scene.target->margin = 0.1;
+    auto spreads = [&](int width, int height) {
+        scene.receiver.width = width;
+        scene.receiver.height = height;
+        const freeform::Target t =
+            freeform::make_target(io::load_target_image(scene), width, height, freeform::Fixed(1) << 40);
+        double m = 0, mx = 0, my = 0, mxx = 0, myy = 0;
+        for (int y = 0; y < height; ++y)
+            for (int x = 0; x < width; ++x) {
+                const double w = double(t.cells[std::size_t(y * width + x)]);
+                const double px = (x + 0.5) * 0.3 / width, py = (y + 0.5) * 0.2 / height;
+                m += w, mx += w * px, my += w * py, mxx += w * px * px, myy += w * py * py;
+            }
+        mx /= m, my /= m;
+        return std::pair{std::sqrt(mxx / m - mx * mx), std::sqrt(myy / m - my * my)};
+    };
+    const auto [sx, sy] = spreads(300, 200);
+    const auto [nx, ny] = spreads(200, 200);
+    CHECK(nx == doctest::Approx(sx).epsilon(0.01));  // before 2026-12-01: 1.5 times as wide
+    CHECK(ny == doctest::Approx(sy).epsilon(0.01));
+    // The canvas: 4 text pixels a receiver pixel along the finer pitch, at most 4096 long.
+    freeform::Receiver r;
+    r.size = {0.3, 0.2};
+    r.width = r.height = 200;
+    CHECK(io::text_canvas(r) == std::pair{1200, 800});
+    r.size = {0.2, 0.2};
+    CHECK(io::text_canvas(r) == std::pair{800, 800});
+    r.width = 2048, r.height = 1024, r.size = {0.4, 0.2};
+    CHECK(io::text_canvas(r) == std::pair{4096, 2048});  // was 4096 x 4096
+    // The PNGs show the 200 x 200 cells at 300 x 200, the light's mean kept; square pixels as they are.
+    r.width = r.height = 200, r.size = {0.3, 0.2};
+    const ImageD cells = io::load_target_image(scene);
+    const ImageD shown = io::shown_square(freeform::resample_area(cells, 200, 200), r);
+    CHECK(shown.cols() == 300);
+    CHECK(shown.rows() == 200);
+    CHECK(shown.mean() == doctest::Approx(freeform::resample_area(cells, 200, 200).mean()).epsilon(1e-9));
+    r.width = 300;
+    CHECK(io::shown_square(cells, r).cols() == cells.cols());
 }
 
 TEST_CASE("PFM reader: RGB averaged to grey, big-endian data, .pfm via read_image_grey") {

@@ -243,15 +243,16 @@ struct RenderArgs {
 // A render's files: irradiance.pfm is the render with the scene's deposit and rays; the
 // PNGs show cell means where a target asked for them (docs/measures.md).
 void write_render_outputs(const fs::path& out, const json& m, const Histogram& render,
-                          const std::optional<CellMeans>& cells) {
+                          const std::optional<CellMeans>& cells, const Receiver& receiver) {
     const ImageD irradiance = render.to_image();
-    const ImageD shown = cells ? cells->histogram.to_image() : irradiance;
+    const ImageD shown = io::shown_square(cells ? cells->histogram.to_image() : irradiance, receiver);
     io::StagedOutput staged(out);
     staged.write("irradiance.pfm", [&](const fs::path& f) { io::write_pfm(f, irradiance.cast<float>()); });
     staged.write("irradiance.png", [&](const fs::path& f) { io::write_png(f, io::tone_map(shown)); });
     if (cells)
         staged.write("comparison.png", [&](const fs::path& f) {
-            io::write_png(f, io::comparison_image(shown, io::target_image_of(cells->target)));
+            io::write_png(f,
+                          io::comparison_image(shown, io::shown_square(io::target_image_of(cells->target), receiver)));
         });
     staged.write("metrics.json", [&](const fs::path& f) { io::write_json(f, m); });
     staged.commit("metrics.json");
@@ -349,7 +350,7 @@ int run_render(const RenderArgs& a) {
     const RenderResult r = render(std::move(job), callbacks);
     status.finish();
     const json m = render_metrics(a, mesh, mesh_material, r);
-    write_render_outputs(a.out, m, r.histogram, r.cells);
+    write_render_outputs(a.out, m, r.histogram, r.cells, r.scene.receiver);
     std::printf("rendered %s with the %s tracer (%s)\n", a.scene.string().c_str(),
                 std::string(to_string(r.decision.tracer)).c_str(), r.decision.reason.c_str());
     if (r.cells)
@@ -661,8 +662,7 @@ void write_design(const DesignArgs& a, const CompletedDesign& d, const json& rep
         if (!monitor.quiet()) status.show(what);
     });
     status.finish();
-    print_design_summary(d, m, a.out,
-                         std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count(),
+    print_design_summary(d, m, a.out, std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count(),
                          target_stretch_text(d.scene, target));
 }
 

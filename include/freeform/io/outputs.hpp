@@ -44,6 +44,21 @@ inline ImageD target_image_of(const Target& t) {
     return img;
 }
 
+// An image of the receiver's cells as the PNGs show it: with square pixels on the
+// receiver, so that a picture keeps its shape where the receiver's own pixels are not
+// square (200 x 200 of them on a 0.3 x 0.2 m receiver are shown 300 x 200). The axis
+// with the longer pitch is resampled up by area (resample_area); within 1 % nothing is
+// changed. The PFMs keep the receiver's own cells.
+inline ImageD shown_square(const ImageD& img, const Receiver& r) {
+    const double ratio = (r.size.x / r.width) / (r.size.y / r.height);  // pixel width / height
+    if (std::abs(ratio - 1.0) <= 0.01 || img.size() == 0) return img;
+    const auto longer = [](Eigen::Index n, double f) {
+        return int(std::clamp<double>(std::round(double(n) * f), 1, 16384));
+    };
+    if (ratio > 1) return resample_area(img, longer(img.cols(), ratio), int(img.rows()));
+    return resample_area(img, int(img.cols()), longer(img.rows(), 1.0 / ratio));
+}
+
 // target | result | difference (blue: too little light, red: too much), same exposure.
 inline RgbImage comparison_image(const ImageD& result, const ImageD& target) {
     const double peak = std::max(target.maxCoeff(), 1e-300);
@@ -110,14 +125,17 @@ inline DesignImages write_design_outputs(const std::filesystem::path& out, nlohm
                         shown ? target_image_of(shown->target) : target_image_of(d.fitted.target), shown_what};
     const ImageD& irradiance = images.irradiance;
     const ImageD& target_img = images.target;
+    const ImageD irradiance_shown = shown_square(irradiance, d.scene.receiver);
+    const ImageD target_shown = shown_square(target_img, d.scene.receiver);
     staged.write("convergence.csv",
                  [&](const std::filesystem::path& f) { write_file_atomically(f, convergence_csv(d.result)); });
     staged.write("heightmap.pfm", [&](const std::filesystem::path& f) { write_heightmap(f, d.result.surface); });
     staged.write("irradiance.pfm", [&](const std::filesystem::path& f) { write_pfm(f, irradiance.cast<float>()); });
-    staged.write("irradiance.png", [&](const std::filesystem::path& f) { write_png(f, tone_map(irradiance)); });
-    staged.write("target.png", [&](const std::filesystem::path& f) { write_png(f, tone_map(target_img)); });
-    staged.write("comparison.png",
-                 [&](const std::filesystem::path& f) { write_png(f, comparison_image(irradiance, target_img)); });
+    staged.write("irradiance.png", [&](const std::filesystem::path& f) { write_png(f, tone_map(irradiance_shown)); });
+    staged.write("target.png", [&](const std::filesystem::path& f) { write_png(f, tone_map(target_shown)); });
+    staged.write("comparison.png", [&](const std::filesystem::path& f) {
+        write_png(f, comparison_image(irradiance_shown, target_shown));
+    });
     nlohmann::json formats_json = nlohmann::json::array(), files_json = nlohmann::json::array();
     for (const ExportFormat format : formats) {
         formats_json.push_back(std::string(to_string(format)));

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <string>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -27,6 +28,20 @@ struct LoadedTarget {
     // at all, or framed by target.fit "contain" or "cover", or text).
     double stretch = 1.0;
 };
+
+// The pixels a text target is drawn on: square on the receiver (its own pixels need not
+// be: 200 x 200 of them on a 0.3 x 0.2 m receiver), so that the letters keep the font's
+// shape, a quarter of the receiver's finer pixel pitch (area resampling to its pixels then
+// anti-aliases the edges), at most 4096 along the longer side. Before 2026-12-01 the canvas
+// was 4x the receiver's pixels along each axis, capped at 4096 each, which stretched the
+// text wherever the receiver's pixels were not square or one side passed 1024 of them.
+inline std::pair<int, int> text_canvas(const Receiver& r) {
+    const double pitch = std::min(r.size.x / r.width, r.size.y / r.height) / 4.0;
+    double w = r.size.x / pitch, h = r.size.y / pitch;
+    const double shrink = std::min(1.0, 4096.0 / std::max(w, h));
+    w *= shrink, h *= shrink;
+    return {int(std::clamp<long long>(std::llround(w), 1, 4096)), int(std::clamp<long long>(std::llround(h), 1, 4096))};
+}
 
 // A picture (relative irradiance, checked) made the target of `scene`'s receiver as its
 // target block says (objective/target.hpp, target_for_receiver), with what is recorded of
@@ -55,7 +70,8 @@ inline nlohmann::json target_fit_json(const Scene& scene, const LoadedTarget& t)
 // stored (grey levels are relative irradiance; a PFM is taken linearly), framed to the
 // receiver's aspect ratio as target.fit says and brought up to the receiver's pixel count
 // along an axis where it has fewer (objective/target.hpp, target_for_receiver), or text
-// rendered at 4x the receiver resolution so that area resampling anti-aliases its edges.
+// rendered on square pixels at 4x the receiver's resolution (text_canvas), so that area
+// resampling anti-aliases its edges.
 // limits.data_file_bytes and limits.pixels bound the image file, and limits.pixels the
 // framed picture.
 inline LoadedTarget load_target(const Scene& scene, const Limits& limits = {}) {
@@ -63,7 +79,7 @@ inline LoadedTarget load_target(const Scene& scene, const Limits& limits = {}) {
     const TargetSpec& t = *scene.target;
     ImageF img;
     if (!t.text.empty()) {
-        const int w = std::min(4 * scene.receiver.width, 4096), h = std::min(4 * scene.receiver.height, 4096);
+        const auto [w, h] = text_canvas(scene.receiver);
         img = render_text(t.text, find_font(t.font), w, h, t.margin);
     } else {
         try {
