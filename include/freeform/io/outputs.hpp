@@ -50,7 +50,7 @@ inline ImageD target_image_of(const Target& t) {
 // with the longer pitch is resampled up by area (resample_area); within 1 % nothing is
 // changed. The PFMs keep the receiver's own cells.
 inline ImageD shown_square(const ImageD& img, const Receiver& r) {
-    const double ratio = (r.size.x / r.width) / (r.size.y / r.height);  // pixel width / height
+    const double ratio = r.pitch().x / r.pitch().y;  // pixel width / height
     if (std::abs(ratio - 1.0) <= 0.01 || img.size() == 0) return img;
     const auto longer = [](Eigen::Index n, double f) {
         return int(std::clamp<double>(std::round(double(n) * f), 1, 16384));

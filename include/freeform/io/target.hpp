@@ -36,7 +36,7 @@ struct LoadedTarget {
 // was 4x the receiver's pixels along each axis, capped at 4096 each, which stretched the
 // text wherever the receiver's pixels were not square or one side passed 1024 of them.
 inline std::pair<int, int> text_canvas(const Receiver& r) {
-    const double pitch = std::min(r.size.x / r.width, r.size.y / r.height) / 4.0;
+    const double pitch = std::min(r.pitch().x, r.pitch().y) / 4.0;
     double w = r.size.x / pitch, h = r.size.y / pitch;
     const double shrink = std::min(1.0, 4096.0 / std::max(w, h));
     w *= shrink, h *= shrink;
@@ -51,7 +51,7 @@ inline LoadedTarget picture_target(const ImageD& picture, const Scene& scene) {
     loaded.picture_width = int(picture.cols());
     loaded.picture_height = int(picture.rows());
     if (!scene.target || scene.target->fit == TargetFit::stretch)
-        loaded.stretch = aspect_stretch(picture.cols(), picture.rows(), scene.receiver.size.x / scene.receiver.size.y);
+        loaded.stretch = aspect_stretch(picture.cols(), picture.rows(), scene.receiver.aspect());
     loaded.image = target_for_receiver(picture, scene);
     return loaded;
 }
@@ -93,14 +93,12 @@ inline LoadedTarget load_target(const Scene& scene, const Limits& limits = {}) {
     if ((out < 0).any()) throw InputError("target.image: " + t.image.string() + " has negative values");
     if (!(out.sum() > 0)) throw InputError("target: " + (t.text.empty() ? t.image.string() : "the text") + " is entirely black");
     if (!t.text.empty()) return {out, 0, 0, 1.0};
-    if (t.fit == TargetFit::contain) {
-        const ImageD framed = frame_to_aspect(out, scene.receiver.size.x / scene.receiver.size.y, t.fit);
-        if (std::uint64_t(framed.size()) > limits.pixels)
-            throw InputError("target.fit: \"contain\" pads " + t.image.string() + " to " +
-                             std::to_string(framed.cols()) + " x " + std::to_string(framed.rows()) +
-                             " pixels, over the limit of " + std::to_string(limits.pixels) +
-                             " (--limit pixels=N raises it)");
-    }
+    // Checked before the padded picture is made.
+    if (const std::uint64_t n = framed_pixels(out.cols(), out.rows(), scene.receiver.aspect(), t.fit);
+        n > limits.pixels)
+        throw InputError("target.fit: \"contain\" pads " + t.image.string() + " to " + std::to_string(n) +
+                         " pixels, over the limit of " + std::to_string(limits.pixels) +
+                         " (--limit pixels=N raises it)");
     return picture_target(out, scene);
 }
 

@@ -133,6 +133,25 @@ inline double aspect_stretch(Eigen::Index w, Eigen::Index h, double aspect) {
     return std::max(own / aspect, aspect / own);
 }
 
+namespace target_detail {
+// How frame_to_aspect changes a w × h picture: along its rows (true) or its columns, by
+// `side` pixels on each side (> 0 added, < 0 removed, 0 none).
+struct Framing {
+    bool rows = false;
+    Eigen::Index side = 0;
+};
+inline Framing framing(Eigen::Index w, Eigen::Index h, double aspect, TargetFit fit) {
+    if (fit == TargetFit::stretch || w == 0 || h == 0 || !(aspect > 0)) return {};
+    const bool wider = double(w) / double(h) > aspect;
+    // contain pads the short axis, cover trims the long one.
+    const bool rows = (fit == TargetFit::contain) == wider;
+    const Eigen::Index have = rows ? h : w;
+    const double want = rows ? double(w) / aspect : double(h) * aspect;
+    // At least one pixel is kept.
+    return {rows, std::max<Eigen::Index>(std::llround((want - double(have)) / 2.0), -(have - 1) / 2)};
+}
+}  // namespace target_detail
+
 // A picture laid on a receiver whose width / height (metres) is `aspect`, its pixels taken
 // as square (docs/scene.md, target.fit). `stretch` leaves it as it is: make_target maps the
 // whole picture onto the whole receiver, stretching it where the aspect ratios differ.
@@ -142,26 +161,24 @@ inline double aspect_stretch(Eigen::Index w, Eigen::Index h, double aspect) {
 // framed aspect ratio is within one pixel pair of the receiver's.
 inline ImageD frame_to_aspect(const ImageD& img, double aspect, TargetFit fit) {
     const Eigen::Index w = img.cols(), h = img.rows();
-    if (fit == TargetFit::stretch || w == 0 || h == 0 || !(aspect > 0)) return img;
-    const bool wider = double(w) / double(h) > aspect;
-    // contain pads the short axis, cover trims the long one.
-    const bool rows = (fit == TargetFit::contain) == wider;
-    const Eigen::Index have = rows ? h : w;
-    const double want = rows ? double(w) / aspect : double(h) * aspect;
-    // Per side: > 0 adds, < 0 removes; at least one pixel is kept.
-    const Eigen::Index side = std::max<Eigen::Index>(std::llround((want - double(have)) / 2.0), -(have - 1) / 2);
+    const auto [rows, side] = target_detail::framing(w, h, aspect, fit);
     if (side == 0) return img;
-    const Eigen::Index n = have + 2 * side;
     if (rows) {
-        if (side < 0) return img.middleRows(-side, n);
-        ImageD out = ImageD::Zero(n, w);
+        if (side < 0) return img.middleRows(-side, h + 2 * side);
+        ImageD out = ImageD::Zero(h + 2 * side, w);
         out.middleRows(side, h) = img;
         return out;
     }
-    if (side < 0) return img.middleCols(-side, n);
-    ImageD out = ImageD::Zero(h, n);
+    if (side < 0) return img.middleCols(-side, w + 2 * side);
+    ImageD out = ImageD::Zero(h, w + 2 * side);
     out.middleCols(side, w) = img;
     return out;
+}
+
+// The pixels (columns × rows) frame_to_aspect would give a w × h picture, without making it.
+inline std::uint64_t framed_pixels(Eigen::Index w, Eigen::Index h, double aspect, TargetFit fit) {
+    const auto [rows, side] = target_detail::framing(w, h, aspect, fit);
+    return std::uint64_t(rows ? w * (h + 2 * side) : (w + 2 * side) * h);
 }
 
 // A picture (relative irradiance, any size) made the target of `scene`'s receiver: framed
@@ -171,7 +188,7 @@ inline ImageD frame_to_aspect(const ImageD& img, double aspect, TargetFit fit) {
 inline ImageD target_for_receiver(const ImageD& picture, const Scene& scene) {
     const TargetSpec spec = scene.target ? *scene.target : TargetSpec{};
     const Receiver& r = scene.receiver;
-    ImageD framed = frame_to_aspect(picture, r.size.x / r.size.y, spec.fit);
+    ImageD framed = frame_to_aspect(picture, r.aspect(), spec.fit);
     if (spec.upsample == TargetUpsample::bilinear) return upsample_linear(framed, r.width, r.height);
     return framed;
 }

@@ -16,6 +16,8 @@ struct Receiver {
     Deposit deposit = Deposit::fine_bilinear;  // core/deposit.hpp
 
     long long cells() const { return static_cast<long long>(width) * height; }
+    double aspect() const { return size.x / size.y; }                 // width / height, metres
+    Vec2d pitch() const { return {size.x / width, size.y / height}; }  // a pixel's extent, metres
 };
 
 }  // namespace freeform
