@@ -130,8 +130,7 @@ struct OtResult {
     void index_exact() {
         envelope_cell_.clear(), envelope_from_.clear();
         envelope_start_.assign(std::size_t(grid.ny) + 1, 0);
-        if (phi.rows() != grid.ny || phi.cols() != grid.nx || target.rows() != grid.ny || target.cols() != grid.nx)
-            return;
+        if (!arrays_on_grid()) return;
         const double inf = std::numeric_limits<double>::infinity();
         for (int j = 0; j < grid.ny; ++j) {
             const std::size_t b = envelope_cell_.size();
@@ -178,9 +177,9 @@ struct OtResult {
 private:
     // Whether envelopes of this grid's size are there (a copy of the result carries its
     // envelopes with its equal arrays).
-    bool exact_index_current() const {
-        return envelope_start_.size() == std::size_t(grid.ny) + 1 && phi.rows() == grid.ny &&
-               phi.cols() == grid.nx && target.rows() == grid.ny && target.cols() == grid.nx;
+    bool exact_index_current() const { return envelope_start_.size() == std::size_t(grid.ny) + 1 && arrays_on_grid(); }
+    bool arrays_on_grid() const {
+        return phi.rows() == grid.ny && phi.cols() == grid.nx && target.rows() == grid.ny && target.cols() == grid.nx;
     }
     std::vector<int> envelope_cell_;       // each row's envelope cells, rows one after another
     std::vector<double> envelope_from_;    // where each envelope cell's interval begins
