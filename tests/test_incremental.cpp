@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <string_view>
+#include <tuple>
 #include <vector>
 
 #include <freeform/anneal/annealer.hpp>
@@ -505,16 +507,16 @@ ProposalSettings proposals() {
     return p;
 }
 
-// `moves` proposals (10,000 unless told), accepted at random (40 %), then compared with
-// a full recompute.
+// `moves` proposals (10,000 unless told) at `temperature`, accepted at random (40 %),
+// then compared with a full recompute.
 template <class Problem, class Fresh>
-void check_problem(Problem& problem, Fresh&& fresh_value, std::uint64_t moves = 10000) {
+void check_problem(Problem& problem, Fresh&& fresh_value, std::uint64_t moves = 10000, double temperature = 1.0) {
     typename Problem::Move m;
     CounterRng pick(1234, 0);
     std::uint64_t accepted = 0;
     for (std::uint64_t it = 0; it < moves; ++it) {
         CounterRng rng(77, it);
-        problem.propose(rng, 1.0, m);
+        problem.propose(rng, temperature, m);
         const double before = problem.energy();
         const double d = problem.delta(m);
         CHECK(problem.energy() == before);  // delta() changes nothing visible
@@ -668,6 +670,97 @@ TEST_CASE("an annealing run whose windows are evaluated together is the per-move
                 CHECK(together.second == serial.second);
                 CHECK(together.first.proposals_evaluated > together.first.iterations);  // windows really ran
             }
+    }
+}
+
+namespace {
+
+// The grazing-light case with a reach envelope of one proposal's room: re-centred often,
+// its limits binding (the default room is 16).
+struct TightReach {
+    Case c = cases().back();
+    ProposalSettings settings = proposals();
+    static constexpr double unit = 2e-5;
+    TightReach() {
+        REQUIRE(std::string_view(c.name) == "grazing light");
+        settings.reach_moves = 1;
+    }
+    SurfaceProblem problem(Setup& s) const {
+        return SurfaceProblem(s.hm, s.rays, s.pp, s.target, {}, s.penalties, settings,
+                              make_bandit(BanditKind::history, 7), unit, 1.0);
+    }
+};
+
+std::int64_t crossings(const IncrementalTrace& t) {
+    std::int64_t n = 0;
+    for (std::int32_t r = 0; r < std::int32_t(t.rays().size()); ++r) n += std::int64_t(t.index().cells_of(r).size());
+    return n;
+}
+
+}  // namespace
+
+TEST_CASE("the reach envelope lists a ray only where a move can reach it, and the state stays a full retrace's" *
+          doctest::test_suite("serial")) {
+    // Under grazing light a ray runs through the height slab over many cells; with the
+    // envelope (trace/incremental.hpp) the index keeps only the cells whose heights can
+    // come near its path before the next re-centring, and proposals keep to its limits.
+    const TightReach tight;
+    Setup s = make_setup(tight.c);
+    SurfaceProblem problem = tight.problem(s);
+    REQUIRE(problem.trace().reach().active());
+    IncrementalTrace plain(s.hm, s.rays, s.pp);  // no margin: every crossing of the slab
+    plain.rebuild(exec::seq);
+    CHECK_FALSE(plain.reach().active());
+    const std::int64_t kept = crossings(problem.trace()), all = crossings(plain);
+    MESSAGE("crossings kept by the envelope: " << kept << " of " << all);
+    CHECK(2 * kept <= all);
+    // What it keeps is the plain trace's (the walk is the same).
+    for (std::int32_t r = 0; r < std::int32_t(s.rays.size()); ++r) {
+        const auto a = problem.trace().index().cells_of(r), b = plain.index().cells_of(r);
+        CHECK(std::includes(b.begin(), b.end(), a.begin(), a.end(),
+                            [](const CellCrossing& x, const CellCrossing& y) { return x.cell < y.cell; }));
+        for (const CellCrossing& x : a) {  // a part of its path where pieces were left out
+            const auto y = std::lower_bound(b.begin(), b.end(), x,
+                                            [](const CellCrossing& p, const CellCrossing& q) { return p.cell < q.cell; });
+            REQUIRE(y != b.end());
+            CHECK((x.zlo >= y->zlo && x.zhi <= y->zhi));
+        }
+    }
+    // At 25 times the reference temperature a proposal may shift the light five times as
+    // far as at the reference: 2.5 margins, more than the envelope holds. Its limits
+    // must then bind, or rays it does not list would meet the moved cells.
+    check_problem(problem, [&] { return tight.problem(s).value(); }, 4000, 25.0);
+    MESSAGE("re-centred " << problem.reach_recentres() << " times");
+    CHECK(problem.reach_recentres() >= 3);
+    CHECK(problem.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+    // Every vertex inside the limits of the envelope now in force.
+    const ReachEnvelope& e = problem.trace().reach();
+    for (std::size_t k = 0; k < s.hm.heights().size(); ++k) {
+        CHECK(s.hm.heights()[k] >= e.vertex_lo[k]);
+        CHECK(s.hm.heights()[k] <= e.vertex_hi[k]);
+    }
+}
+
+TEST_CASE("under the reach envelope, windows evaluated together are still the per-move run bit for bit") {
+    const TightReach tight;
+    const auto run = [&](int windows, int speculative, int threads) {
+        Setup s = make_setup(tight.c);
+        SurfaceProblem problem = tight.problem(s);
+        REQUIRE(problem.trace().reach().active());
+        problem.set_window_evaluation(windows == 1);
+        if (windows == 2)
+            problem.set_window_evaluator(std::make_unique<CopiedStateWindowEvaluator>(
+                std::make_unique<HostKernelWindowBackend<exec::omp_t>>(exec::omp_t{threads})));
+        const AnnealResult r = anneal(problem, fixed_windows(1500, speculative, threads));
+        CHECK(problem.histogram() == trace_scene(s.scene, s.hm, s.rays).histogram);
+        CHECK(problem.reach_recentres() > 0);
+        return std::make_tuple(r.accepted, r.final_energy, s.hm.heights(), problem.reach_recentres());
+    };
+    const auto serial = run(0, 1, 1);
+    CHECK(std::get<0>(serial) > 20);
+    for (const int windows : {1, 2}) {
+        CAPTURE(windows);
+        CHECK(run(windows, 8, 2) == serial);
     }
 }
 

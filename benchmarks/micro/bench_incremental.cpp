@@ -9,6 +9,7 @@
 // evaluated move). Ratios are meant to be read within one run: the machine is shared.
 #include <benchmark/benchmark.h>
 
+#include <chrono>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -39,11 +40,17 @@ struct Bench {
     Target target;
     Penalties penalties;
 
-    Bench(int mesh, int resolution) {
+    // near_light: a point light 5 cm above the mirror's centre and height bounds of
+    // +-15 mm (oblique light: rays run through the slab over many cells).
+    Bench(int mesh, int resolution, bool near_light = false) {
         scene.surface.frame = make_frame({0, 0, 0}, {0, 0, 1}, {0, 1, 0}, "surface");
         scene.receiver.frame = make_frame({0, 0, 0.5}, {0, 0, -1}, {0, 1, 0}, "receiver");
         scene.receiver.width = scene.receiver.height = resolution;
         scene.light.rays_per_cell = 16;
+        if (near_light) {
+            scene.light.shape = PointLight{{0, 0, 0.05}, {}, {}};
+            scene.surface.h_min = -0.015, scene.surface.h_max = 0.015;
+        }
         surface = Heightmap(mesh, mesh, scene.surface.size, scene.surface.h_min, scene.surface.h_max,
                             scene.surface.frame);
         std::vector<float> h(std::size_t(mesh) * mesh);
@@ -146,6 +153,28 @@ void window_evaluation(benchmark::State& state) {
                            make_bandit(BanditKind::uniform, 7), b.unit(), 1.0);
     problem.set_window_evaluation(true);
     run_annealer(state, problem, speculative, threads, 2000);
+}
+
+// The reach envelope (docs/architecture.md §4) against the plain index, under a point
+// light 5 cm above the mirror, with the margin `reach_moves` (0: no envelope; 16: the
+// default): the same moves and the same trajectory (the limits never bind), so the rows
+// differ only in speed. Counters: build_seconds (the problem's first full trace),
+// crossings_per_ray (the index's), envelope_kept, recentres (full rebuilds round new
+// heights), iterations_per_second.
+void reach_envelope(benchmark::State& state) {
+    const int mesh = int(state.range(0));
+    Bench b(mesh, 100, true);
+    ProposalSettings p = b.proposals(5);
+    p.reach_moves = double(state.range(1));
+    const auto t0 = std::chrono::steady_clock::now();
+    SurfaceProblem problem(b.surface, b.rays, b.params, b.target, {}, b.penalties, p,
+                           make_bandit(BanditKind::uniform, 7), b.unit(), 1.0);
+    const double build = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    run_annealer(state, problem, 1, 1, 2000);
+    state.counters["build_seconds"] = build;
+    state.counters["crossings_per_ray"] = double(problem.trace().index().crossings()) / double(b.rays.size());
+    state.counters["envelope_kept"] = problem.trace().reach().active() ? 1 : 0;
+    state.counters["recentres"] = double(problem.reach_recentres());
 }
 
 // The reference's loop: every move retraces every ray (with the height-field tracer, or
@@ -262,6 +291,12 @@ BENCHMARK(incremental)
 BENCHMARK(incremental)
     ->Apply([](benchmark::internal::Benchmark* b) { sizes(b, true); })
     ->ArgNames({"mesh", "receiver", "kernel", "speculative", "threads"})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(reach_envelope)
+    ->ArgsProduct({{101, 201, 401}, {0, 4, 16, 64}})
+    ->ArgNames({"mesh", "reach_moves"})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();

@@ -68,6 +68,11 @@ struct StageReport {
     std::int64_t held_out_kept = -1;  // stage iteration of the state kept instead of the
                                       // annealer's best (-1: the annealer's best was kept)
     std::int64_t merges = 0;  // replicas sharing one surface: merges made (replicas.hpp)
+    // The trace's index at the stage's end: ray/cell crossings listed, and whether a reach
+    // envelope kept them down (trace/incremental.hpp), re-centred how many times.
+    std::int64_t crossings = 0;
+    bool reach_envelope = false;
+    std::int64_t reach_recentres = 0;
 };
 
 struct ConvergencePoint {
@@ -672,14 +677,23 @@ void add_held_out(const State& d, LevelSetup& L) {
 // spent 25 s, most of it building traces, for 24 iterations that changed nothing
 // (docs/performance.md, "The time budget"). Returns, in words, why the level and those
 // after it are left out; nothing when it can be afforded.
+//
+// The crossings counted are those the trace will list: under oblique light its reach
+// envelope (trace/incremental.hpp) leaves out most of the slab's, with the first
+// stage's margin (the widest kernels the level uses).
 template <class State>
 std::optional<std::string> unaffordable_level(const State& d, const LevelSetup& L) {
     const RaySet& rays = L.trace_setup.rays;
-    const RebuildSample sample = sample_rebuild(d.surface, rays, L.trace_setup.params, 64);
+    const int support = L.plan->kernel_supports.empty() ? 3 : L.plan->kernel_supports.front();
+    ReachEnvelope reach;
+    reach.margin = float(reach_margin(proposals_for(d.moves.proposals, support), L.unit));
+    if (std::isfinite(reach.margin)) reach.centre_on(d.surface);
+    const RebuildSample sample = sample_rebuild(d.surface, rays, L.trace_setup.params, 64, reach.view());
     if (sample.rays == 0) return std::nullopt;
     const double scale = double(rays.size()) / double(sample.rays);
+    const double listed = double(2 * sample.admitted <= sample.crossings ? sample.admitted : sample.crossings);
     const double build =
-        sample.seconds * scale / double(d.threads) + double(sample.crossings) * scale * rebuild_seconds_per_crossing;
+        sample.seconds * scale / double(d.threads) + listed * scale * rebuild_seconds_per_crossing;
     const double left = d.options.time_budget - d.clock();
     if (2 * build <= left) return std::nullopt;
     const std::size_t after = d.levels.size() - L.index - 1;
@@ -1044,6 +1058,9 @@ void run_stage(State& d, LevelSetup& L, std::size_t si) {
     if (d.replicas.shares_surface() && hooks.merged_at != ar.iterations)
         hooks.merge(ar.iterations, false);  // the stage's end checks it (below)
     report.merges = hooks.merges;
+    report.crossings = problem.trace().index().crossings();
+    report.reach_envelope = problem.trace().reach().active();
+    report.reach_recentres = problem.reach_recentres();
     if (judge_first) {
         keep_judged(d, problem, *held_out, held_best, ar.iterations, report);
     } else if (held_out) {

@@ -37,7 +37,27 @@ struct ProposalSettings {
     // [-s, s] with s = max_shift * sqrt(T / T_ref), never below min_shift.
     double max_shift_cells = 4.0;
     double min_shift_cells = 0.25;
+    // The reach envelope's margin, in the largest proposals one vertex may take before
+    // the trace is rebuilt round the new heights (reach_margin below); 0: no envelope.
+    double reach_moves = 16;
 };
+
+// The largest height change one proposal can make at the reference temperature: the
+// widest kernel of the bank at max_shift_cells (propose() below).
+inline double largest_proposal(const ProposalSettings& p, double metres_per_cell_shift) {
+    double width = 1;
+    if (!p.single_vertex)
+        for (const KernelShape& k : p.bank) width = std::max(width, std::sqrt(k.sigma_x * k.sigma_y) / 0.6);
+    return p.max_shift_cells * metres_per_cell_shift * width;
+}
+
+// The reach envelope's margin for these proposals (trace/incremental.hpp): room for
+// p.reach_moves of the largest proposals piled on one vertex, the trace rebuilt round
+// the new heights once a vertex has used half of it, so that the limits seldom bind.
+// Infinite (no envelope) when reach_moves is 0.
+inline double reach_margin(const ProposalSettings& p, double metres_per_cell_shift) {
+    return p.reach_moves > 0 ? p.reach_moves * largest_proposal(p, metres_per_cell_shift) : INFINITY;
+}
 
 // How a problem retraces the rays a move can affect. The height-field backend traces
 // against "surface + overlay" through an OverlayView: delta() changes nothing, so
@@ -119,11 +139,15 @@ public:
             throw InputError("optimise.kernels: the kernel bank is empty");
         if constexpr (requires { requires Backend::stateless; }) {
             if (reuse && &reuse->rays() == &rays && &reuse->surface() == &surface) {
+                // Its envelope, if any, was made for the problem before this one and stays
+                // in force; this problem's margin takes over at the next rebuild.
                 trace_ = std::move(*reuse);
+                set_reach_margin();
                 reset_sums(trace_.histogram());
                 return;
             }
         }
+        set_reach_margin();
         rebuild();
     }
 
@@ -159,13 +183,14 @@ public:
         const double s = rng.uniform(-1.0, 1.0) * shift;
         if (proposals_.single_vertex) {
             m.arm = -1;
-            apply_single_vertex(*surface_, ci, cj, float(s * unit_), m.overlay);
+            apply_single_vertex(*surface_, ci, cj, float(s * unit_), m.overlay, trace_.vertex_bounds());
         } else {
             m.arm = bandit_.choose(rng);
             const KernelShape& k = proposals_.bank[std::size_t(m.arm)];
             // Slope of a Gaussian peaks at 0.6 amplitude / sigma: scale by the kernel's width.
             const double width = std::sqrt(k.sigma_x * k.sigma_y) / 0.6;
-            apply_kernel(*surface_, kernels_[std::size_t(m.arm)], ci, cj, float(s * unit_ * width), m.overlay);
+            apply_kernel(*surface_, kernels_[std::size_t(m.arm)], ci, cj, float(s * unit_ * width), m.overlay,
+                         trace_.vertex_bounds());
         }
         m.overlay.trim(*surface_);
         m.noop = m.overlay.empty();
@@ -274,7 +299,11 @@ public:
         image_.apply(m.change.histogram, m.sums);
         penalty_sum_ = m.penalty_sum;
         value_ = combine(image_.sums(), image_.target().total, Penalties::value(penalty_sum_, *surface_), weights_);
+        if (trace_.reach().spent(m.overlay, surface_->nx())) recentre_reach();
     }
+
+    // Full rebuilds of the trace that re-centred its reach envelope (accept()).
+    std::int64_t reach_recentres() const { return recentres_; }
 
     void reject(Move& m) {
         if (m.arm >= 0) bandit_.update(m.arm, 0.0);
@@ -343,6 +372,8 @@ private:
         m.overlay.heights = heights;
         m.overlay.trim(*surface_);  // the box of the heights that differ, and its normals
         if (4 * m.overlay.patch.count() > surface_->full_patch().count()) return false;
+        // Heights from before the envelope's last re-centring may lie outside it.
+        if (!trace_.reach().holds(m.overlay, surface_->nx())) return false;
         if (!m.overlay.empty()) {
             delta(m);
             m.overlay.commit(*surface_);
@@ -360,6 +391,21 @@ private:
     }
 
     // Every sum the problem maintains, from the irradiance of the current surface.
+    // The reach envelope (trace/incremental.hpp) for this problem's proposals: only the
+    // height-field backend's walk reports the path heights it needs.
+    void set_reach_margin() {
+        if constexpr (std::is_same_v<Backend, HeightfieldBackend>)
+            trace_.set_reach_margin(float(reach_margin(proposals_, unit_)));
+    }
+
+    // Rebuilds the trace round the present heights. The records and histogram come out
+    // as they are (the trace's invariant), so nothing else changes: not the sums, not
+    // which state is the best.
+    void recentre_reach() {
+        (void)backend_.rebuild(trace_);
+        ++recentres_;
+    }
+
     void reset_sums(const Histogram& h) {
         image_.reset(h);
         penalty_sum_ = penalties_->full(*surface_);
@@ -433,6 +479,7 @@ private:
     bool best_is_current_ = true;
     std::vector<float> best_heights_;
     double max_error_ = 0;
+    std::int64_t recentres_ = 0;
     int row0_ = 0, row1_;  // centre rows [row0_, row1_): the whole mesh unless set_centre_rows
     mutable std::unique_ptr<WindowEvaluator> evaluator_;  // delta_window's, null: windows off
     mutable std::string window_failure_;                  // why it was dropped (drop_evaluator)

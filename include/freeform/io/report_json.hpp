@@ -42,6 +42,8 @@ inline nlohmann::json stage_report_json(const StageReport& s) {
                          {"checks", s.held_out_checks},
                          {"kept_iteration", s.held_out_kept}};
     if (s.merges > 0) j["merges"] = s.merges;
+    if (s.rays > 0 && s.crossings > 0) j["crossings_per_ray"] = double(s.crossings) / double(s.rays);
+    if (s.reach_envelope) j["reach_envelope"] = {{"recentres", s.reach_recentres}};
     return j;
 }
 

@@ -202,17 +202,19 @@ inline std::vector<int> kernel_support_levels(int mesh_vertices_per_side) {
 
 // Fills `out` with the surface as it would be after adding amplitude · K centred at
 // vertex (ci, cj), which must lie on the grid: heights over the kernel's footprint
-// clipped to the grid, clamped to the height bounds, and the normals that change.
+// clipped to the grid, clamped to the height bounds (and to `limits` where given: an
+// incremental trace's reach envelope), and the normals that change.
 // `out`'s buffers are reused, so a warmed-up overlay does not allocate.
 inline void apply_kernel(const Heightmap& base, const Kernel& k, int ci, int cj, float amplitude,
-                         HeightOverlay& out) {
+                         HeightOverlay& out, VertexBounds limits = {}) {
     FREEFORM_KERNEL_ASSERT(ci >= 0 && ci < base.nx() && cj >= 0 && cj < base.ny());
     out.patch = k.footprint(ci, cj).clipped(base.nx(), base.ny());
     out.heights.resize(std::size_t(out.patch.count()));
     std::size_t n = 0;
     for (int j = out.patch.j0; j <= out.patch.j1; ++j)
         for (int i = out.patch.i0; i <= out.patch.i1; ++i)
-            out.heights[n++] = base.clamp_height(kernel_height(base(i, j), amplitude, k.at(i - ci, j - cj)));
+            out.heights[n++] = limits.clamp(std::size_t(j) * std::size_t(base.nx()) + std::size_t(i),
+                                            base.clamp_height(kernel_height(base(i, j), amplitude, k.at(i - ci, j - cj))));
     out.finish(base);
 }
 

@@ -15,6 +15,19 @@
 
 namespace freeform {
 
+// Per-vertex height limits narrower than the height bounds (row-major over the grid), or
+// none (null): the reach envelope of an incremental trace (trace/incremental.hpp), which
+// stays exact only while every vertex stays inside them. Proposals clamp to them after
+// the height bounds.
+struct VertexBounds {
+    const float* lo = nullptr;
+    const float* hi = nullptr;
+
+    explicit operator bool() const { return lo != nullptr; }
+    // Height h of vertex k (row-major) clamped to its limits; h itself without limits.
+    float clamp(std::size_t k, float h) const { return lo != nullptr ? std::clamp(h, lo[k], hi[k]) : h; }
+};
+
 struct HeightOverlay {
     Patch patch;         // vertices whose heights change (inside the grid)
     Patch normal_patch;  // vertices whose normals change: patch dilated by 1, clipped

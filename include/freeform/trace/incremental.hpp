@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <exception>
 #include <memory>
@@ -119,6 +120,12 @@ public:
 
     std::int64_t ray_count() const { return std::int64_t(slot_.size()); }
     std::int64_t cell_count() const { return std::int64_t(cell_rays_.size()); }
+    // Ray/cell crossings listed, all rays together.
+    std::int64_t crossings() const {
+        std::int64_t n = 0;
+        for (const Slot& s : slot_) n += s.count;
+        return n;
+    }
 
     std::size_t memory_bytes() const {
         std::size_t b = pool_.capacity() * sizeof(CellCrossing) + slot_.capacity() * sizeof(Slot);
@@ -194,6 +201,83 @@ inline std::size_t sort_merge_cells(CellCrossing* cells, std::size_t n) {
     return w + 1;
 }
 
+// The reach envelope (docs/architecture.md §4, "The reach envelope"). Under oblique
+// light a ray's path runs through the height slab over many cells (a point light 5 cm
+// above a 10 cm mirror with 30 mm of height bounds: some 120 cells at 401²), yet it can
+// only meet the few whose heights come near it. While every vertex stays within `margin`
+// of the height it had when the trace was built, a cell's corners stay inside
+// [cell_lo, cell_hi] (its vertices' limits, widened by the walk's rounding allowance);
+// a crossing whose path lies wholly outside that range can then never pass the walk's
+// culling test (within_reach), so the index leaves it out. Proposals are clamped to the
+// vertex limits (VertexBounds), and the problem rebuilds the trace, re-centring the
+// envelope, once an accepted move takes a vertex more than margin / 2 from its centre.
+struct ReachView {
+    const float* lo = nullptr;  // per surface cell (null: every crossing is kept)
+    const float* hi = nullptr;
+    FREEFORM_FORCE_INLINE bool admits(std::int32_t cell, float zlo, float zhi) const {
+        return lo == nullptr || (zlo <= hi[cell] && zhi >= lo[cell]);
+    }
+};
+
+struct ReachEnvelope {
+    float margin = INFINITY;  // infinite: no envelope
+    std::vector<float> centre, vertex_lo, vertex_hi;  // per vertex, row-major
+    std::vector<float> cell_lo, cell_hi;              // per surface cell, row-major
+
+    bool active() const { return !cell_lo.empty(); }
+    ReachView view() const { return active() ? ReachView{cell_lo.data(), cell_hi.data()} : ReachView{}; }
+    VertexBounds bounds() const { return active() ? VertexBounds{vertex_lo.data(), vertex_hi.data()} : VertexBounds{}; }
+    void clear() {
+        for (auto* v : {&centre, &vertex_lo, &vertex_hi, &cell_lo, &cell_hi}) std::vector<float>().swap(*v);
+    }
+
+    // The envelope of `surface`'s present heights.
+    void centre_on(const Heightmap& surface) {
+        const int nx = surface.nx(), ny = surface.ny();
+        centre = surface.heights();
+        vertex_lo.resize(centre.size());
+        vertex_hi.resize(centre.size());
+        for (std::size_t k = 0; k < centre.size(); ++k) {
+            vertex_lo[k] = std::max(surface.h_min(), centre[k] - margin);
+            vertex_hi[k] = std::min(surface.h_max(), centre[k] + margin);
+        }
+        const float pad = hf_detail::grid_of(surface.view()).z_pad;
+        cell_lo.resize(std::size_t(nx - 1) * std::size_t(ny - 1));
+        cell_hi.resize(cell_lo.size());
+        for (int j = 0; j + 1 < ny; ++j)
+            for (int i = 0; i + 1 < nx; ++i) {
+                const std::size_t v = std::size_t(j) * std::size_t(nx) + std::size_t(i), c = std::size_t(j) * std::size_t(nx - 1) + std::size_t(i);
+                const std::size_t up = v + std::size_t(nx);
+                cell_lo[c] = std::min(std::min(vertex_lo[v], vertex_lo[v + 1]), std::min(vertex_lo[up], vertex_lo[up + 1])) - pad;
+                cell_hi[c] = std::max(std::max(vertex_hi[v], vertex_hi[v + 1]), std::max(vertex_hi[up], vertex_hi[up + 1])) + pad;
+            }
+    }
+
+    // Whether some vertex of `o` lies more than margin / 2 from its centre: time to
+    // re-centre before the limits start to bind.
+    bool spent(const HeightOverlay& o, int nx) const {
+        if (!active()) return false;
+        std::size_t k = 0;
+        for (int j = o.patch.j0; j <= o.patch.j1; ++j)
+            for (int i = o.patch.i0; i <= o.patch.i1; ++i, ++k)
+                if (std::abs(o.heights[k] - centre[std::size_t(j) * std::size_t(nx) + std::size_t(i)]) > 0.5f * margin)
+                    return true;
+        return false;
+    }
+
+    // Whether every vertex of `o` is inside its limits (a move made without them).
+    bool holds(const HeightOverlay& o, int nx) const {
+        if (!active()) return true;
+        std::size_t k = 0;
+        for (int j = o.patch.j0; j <= o.patch.j1; ++j)
+            for (int i = o.patch.i0; i <= o.patch.i1; ++i, ++k) {
+                const std::size_t v = std::size_t(j) * std::size_t(nx) + std::size_t(i);
+                if (!(o.heights[k] >= vertex_lo[v] && o.heights[k] <= vertex_hi[v])) return false;
+            }
+        return true;
+    }
+};
+
 // Collects the surface cells a traced path crosses, with the path's height range over
 // each. Called for every cell of every walk, so it only merges an immediate repeat and is
 // forced inline (an out-of-line call makes the walk spill its registers); finish() merges
@@ -202,8 +286,10 @@ struct CellCollector {
     std::vector<CellCrossing>* out;
     std::size_t first;  // where this ray's cells start in *out
     int cells_per_row;
+    ReachView reach{};  // only the crossings it admits are kept (none: all)
     FREEFORM_FORCE_INLINE void operator()(int ci, int cj, float zlo, float zhi) const {
         const std::int32_t c = cj * cells_per_row + ci;
+        if (!reach.admits(c, zlo, zhi)) return;
         if (out->size() > first && out->back().cell == c) {
             CellCrossing& last = out->back();
             last.zlo = zlo < last.zlo ? zlo : last.zlo;
@@ -229,6 +315,7 @@ struct LaneCellBuffer {
     static constexpr bool active = true;
     static constexpr int capacity = 48;
     int cells_per_row = 0;
+    ReachView reach{};           // only the crossings it admits are kept (none: all)
     std::uint32_t overflow = 0;  // bit l: lane l ran out of room
     int count[packet::width] = {};
     CellCrossing cell[packet::width][capacity];
@@ -239,6 +326,7 @@ struct LaneCellBuffer {
     }
     FREEFORM_FORCE_INLINE void operator()(int l, int ci, int cj, float zlo, float zhi) {
         const std::int32_t c = cj * cells_per_row + ci;
+        if (!reach.admits(c, zlo, zhi)) return;
         int& n = count[l];
         if (n > 0 && cell[l][n - 1].cell == c) {
             CellCrossing& last = cell[l][n - 1];
@@ -329,14 +417,16 @@ struct TraceChange : TracePart {
 // it, its cells collected: how many rays, in how many seconds, crossing how many cells.
 // A design with a time budget asks this before it builds a trace it may not afford
 // (design/designer.hpp, the level's start).
+// `admitted`: the crossings a reach envelope keeps, where one is given (else all).
 struct RebuildSample {
     std::int64_t rays = 0;
     double seconds = 0;
     std::int64_t crossings = 0;
+    std::int64_t admitted = 0;
 };
 
 inline RebuildSample sample_rebuild(const Heightmap& surface, const RaySet& rays, const PathParams& params,
-                                    std::int64_t stride) {
+                                    std::int64_t stride, ReachView reach = {}) {
     const auto t0 = std::chrono::steady_clock::now();
     RebuildSample s;
     std::vector<CellCrossing> cells;
@@ -347,6 +437,7 @@ inline RebuildSample sample_rebuild(const Heightmap& surface, const RaySet& rays
         trace_heightfield_ray(hf, params, rays.origin[std::size_t(k)], rays.direction[std::size_t(k)], visit);
         visit.finish();
         s.crossings += std::int64_t(cells.size());
+        for (const CellCrossing& c : cells) s.admitted += reach.admits(c.cell, c.zlo, c.zhi) ? 1 : 0;
         ++s.rays;
     }
     s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -368,12 +459,22 @@ public:
     // elsewhere (a device's, trace/window.hpp) knows from it whether it is still current.
     std::uint64_t version() const { return version_; }
     const std::array<Fixed, weight_slots>& weight_by_status() const { return status_weight_; }
+
+    // The reach envelope's margin (metres; infinite: none, the default). Takes effect at
+    // the next rebuild(), which keeps the envelope only where it leaves out at least
+    // half of the crossings (a sample of every 64th ray): under light near the normal a
+    // path crosses a cell or two anyway, and the limits would cost without paying.
+    void set_reach_margin(float margin) { reach_.margin = margin; }
+    const ReachEnvelope& reach() const { return reach_; }
+    // The vertex limits proposals must keep (none when no envelope is in force).
+    VertexBounds vertex_bounds() const { return reach_.bounds(); }
     int receiver_width() const { return params_.receiver.width; }
     int receiver_height() const { return params_.receiver.height; }
 
     // Full trace: records, index and histogram from scratch.
     template <HostPolicy P>
     Histogram rebuild(P policy) {
+        centre_reach();
         const std::int64_t n = rays_->size();
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
@@ -399,6 +500,7 @@ public:
 #if !defined(__CUDACC__)
             if (packet::use_packets(params_)) {
                 auto lanes = std::make_unique<LaneCellBuffer>();
+                lanes->reach = reach_.view();
                 const hf_detail::Grid grid = hf_detail::grid_of(hf);
                 for (std::int64_t k0 = begin; k0 < end; k0 += packet::width) {
                     const int count = int(std::min<std::int64_t>(packet::width, end - k0));
@@ -417,7 +519,7 @@ public:
 #endif
             for (std::int64_t k = begin; k < end; ++k) {
                 starts.push_back(std::int64_t(cells.size()));
-                CellCollector visit{&cells, cells.size(), surface_->nx() - 1};
+                CellCollector visit{&cells, cells.size(), surface_->nx() - 1, reach_.view()};
                 records_[std::size_t(k)] = trace_heightfield_ray(hf, params_, rays_->origin[std::size_t(k)],
                                                                  rays_->direction[std::size_t(k)], visit);
                 visit.finish();
@@ -446,6 +548,7 @@ public:
     // calling visit(ci, cj) for every cell its path crosses inside the slab (serial).
     template <class Retrace>
     Histogram rebuild_with(Retrace&& retrace) {
+        reach_.clear();  // a tracer of its own may not report the path's heights
         const std::int64_t n = rays_->size();
         records_.assign(std::size_t(n), RayRecord{});
         index_.reset(n, cell_count());
@@ -638,7 +741,7 @@ private:
         change.cell_begin.resize(change.rays.size() + 1);
         for (std::size_t k = 0; k < change.rays.size(); ++k) {
             change.cell_begin[k] = std::int32_t(change.cells.size());
-            CellCollector visit{&change.cells, change.cells.size(), cells_per_row};
+            CellCollector visit{&change.cells, change.cells.size(), cells_per_row, reach_.view()};
             const RayRecord now = retrace(change.rays[k], visit);
             visit.finish();
             change.records[k] = now;
@@ -654,6 +757,7 @@ private:
     void trace_packet(const View& view, const hf_detail::Grid& grid, const Vec3* o, const Vec3* d, int n,
                       RayRecord* rec, LaneCellBuffer& lanes) const {
         lanes.cells_per_row = surface_->nx() - 1;
+        lanes.reach = reach_.view();
         lanes.clear();
         packet::trace_rays(view, grid, params_, o, d, n, rec, lanes);
     }
@@ -664,7 +768,7 @@ private:
     void append_lane_cells(const View& view, LaneCellBuffer& lanes, int l, Vec3 o, Vec3 d, RayRecord& rec,
                            std::vector<CellCrossing>& out) const {
         if (lanes.overflow >> l & 1u) {
-            CellCollector visit{&out, out.size(), surface_->nx() - 1};
+            CellCollector visit{&out, out.size(), surface_->nx() - 1, reach_.view()};
             rec = trace_heightfield_ray(view, params_, o, d, visit);
             visit.finish();
             return;
@@ -900,9 +1004,22 @@ private:
                 if (b.amount[k] != 0) d.add(b.cell[k], b.amount[k]);
     }
 
+    // The envelope of the present heights, kept when a sample of every 64th ray says it
+    // leaves out at least half of the crossings (set_reach_margin).
+    void centre_reach() {
+        if (!std::isfinite(reach_.margin)) {
+            reach_.clear();
+            return;
+        }
+        reach_.centre_on(*surface_);
+        const RebuildSample s = sample_rebuild(*surface_, *rays_, params_, 64, reach_.view());
+        if (!(s.crossings > 0 && 2 * s.admitted <= s.crossings)) reach_.clear();
+    }
+
     const Heightmap* surface_;
     const RaySet* rays_;
     PathParams params_;
+    ReachEnvelope reach_;
     std::vector<RayRecord> records_;
     RayCellIndex index_;
     std::array<Fixed, weight_slots> status_weight_{};
