@@ -717,11 +717,10 @@ TEST_CASE("the reach envelope lists a ray only where a move can reach it, and th
     // What it keeps is the plain trace's (the walk is the same).
     for (std::int32_t r = 0; r < std::int32_t(s.rays.size()); ++r) {
         const auto a = problem.trace().index().cells_of(r), b = plain.index().cells_of(r);
-        CHECK(std::includes(b.begin(), b.end(), a.begin(), a.end(),
-                            [](const CellCrossing& x, const CellCrossing& y) { return x.cell < y.cell; }));
+        const auto by_cell = [](const CellCrossing& x, const CellCrossing& y) { return x.cell < y.cell; };
+        CHECK(std::includes(b.begin(), b.end(), a.begin(), a.end(), by_cell));
         for (const CellCrossing& x : a) {  // a part of its path where pieces were left out
-            const auto y = std::lower_bound(b.begin(), b.end(), x,
-                                            [](const CellCrossing& p, const CellCrossing& q) { return p.cell < q.cell; });
+            const auto y = std::lower_bound(b.begin(), b.end(), x, by_cell);
             REQUIRE(y != b.end());
             CHECK((x.zlo >= y->zlo && x.zhi <= y->zhi));
         }

@@ -212,9 +212,10 @@ inline void apply_kernel(const Heightmap& base, const Kernel& k, int ci, int cj,
     out.heights.resize(std::size_t(out.patch.count()));
     std::size_t n = 0;
     for (int j = out.patch.j0; j <= out.patch.j1; ++j)
-        for (int i = out.patch.i0; i <= out.patch.i1; ++i)
-            out.heights[n++] = limits.clamp(std::size_t(j) * std::size_t(base.nx()) + std::size_t(i),
-                                            base.clamp_height(kernel_height(base(i, j), amplitude, k.at(i - ci, j - cj))));
+        for (int i = out.patch.i0; i <= out.patch.i1; ++i) {
+            const float h = base.clamp_height(kernel_height(base(i, j), amplitude, k.at(i - ci, j - cj)));
+            out.heights[n++] = limits.clamp(std::size_t(j) * std::size_t(base.nx()) + std::size_t(i), h);
+        }
     out.finish(base);
 }
 

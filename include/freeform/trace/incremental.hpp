@@ -244,12 +244,14 @@ struct ReachEnvelope {
         const float pad = hf_detail::grid_of(surface.view()).z_pad;
         cell_lo.resize(std::size_t(nx - 1) * std::size_t(ny - 1));
         cell_hi.resize(cell_lo.size());
+        std::size_t c = 0;
         for (int j = 0; j + 1 < ny; ++j)
-            for (int i = 0; i + 1 < nx; ++i) {
-                const std::size_t v = std::size_t(j) * std::size_t(nx) + std::size_t(i), c = std::size_t(j) * std::size_t(nx - 1) + std::size_t(i);
-                const std::size_t up = v + std::size_t(nx);
-                cell_lo[c] = std::min(std::min(vertex_lo[v], vertex_lo[v + 1]), std::min(vertex_lo[up], vertex_lo[up + 1])) - pad;
-                cell_hi[c] = std::max(std::max(vertex_hi[v], vertex_hi[v + 1]), std::max(vertex_hi[up], vertex_hi[up + 1])) + pad;
+            for (int i = 0; i + 1 < nx; ++i, ++c) {
+                const std::size_t v = std::size_t(j) * std::size_t(nx) + std::size_t(i), up = v + std::size_t(nx);
+                const auto& lo = vertex_lo;
+                const auto& hi = vertex_hi;
+                cell_lo[c] = std::min(std::min(lo[v], lo[v + 1]), std::min(lo[up], lo[up + 1])) - pad;
+                cell_hi[c] = std::max(std::max(hi[v], hi[v + 1]), std::max(hi[up], hi[up + 1])) + pad;
             }
     }
 
