@@ -691,12 +691,6 @@ struct TightReach {
     }
 };
 
-std::int64_t crossings(const IncrementalTrace& t) {
-    std::int64_t n = 0;
-    for (std::int32_t r = 0; r < std::int32_t(t.rays().size()); ++r) n += std::int64_t(t.index().cells_of(r).size());
-    return n;
-}
-
 }  // namespace
 
 TEST_CASE("the reach envelope lists a ray only where a move can reach it, and the state stays a full retrace's" *
@@ -711,7 +705,7 @@ TEST_CASE("the reach envelope lists a ray only where a move can reach it, and th
     IncrementalTrace plain(s.hm, s.rays, s.pp);  // no margin: every crossing of the slab
     plain.rebuild(exec::seq);
     CHECK_FALSE(plain.reach().active());
-    const std::int64_t kept = crossings(problem.trace()), all = crossings(plain);
+    const std::int64_t kept = problem.trace().index().crossings(), all = plain.index().crossings();
     MESSAGE("crossings kept by the envelope: " << kept << " of " << all);
     CHECK(2 * kept <= all);
     // What it keeps is the plain trace's (the walk is the same).

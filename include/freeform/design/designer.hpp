@@ -691,9 +691,8 @@ std::optional<std::string> unaffordable_level(const State& d, const LevelSetup& 
     const RebuildSample sample = sample_rebuild(d.surface, rays, L.trace_setup.params, 64, reach.view());
     if (sample.rays == 0) return std::nullopt;
     const double scale = double(rays.size()) / double(sample.rays);
-    const double listed = double(2 * sample.admitted <= sample.crossings ? sample.admitted : sample.crossings);
-    const double build =
-        sample.seconds * scale / double(d.threads) + listed * scale * rebuild_seconds_per_crossing;
+    const double build = sample.seconds * scale / double(d.threads) +
+                         double(sample.listed()) * scale * rebuild_seconds_per_crossing;
     const double left = d.options.time_budget - d.clock();
     if (2 * build <= left) return std::nullopt;
     const std::size_t after = d.levels.size() - L.index - 1;

@@ -42,12 +42,16 @@ struct ProposalSettings {
     double reach_moves = 16;
 };
 
+// A kernel's amplitude per unit of light shift, in grid units: the slope of a Gaussian
+// peaks at 0.6 amplitude / sigma, so moves scale by the kernel's width (propose()).
+inline double kernel_width(const KernelShape& k) { return std::sqrt(k.sigma_x * k.sigma_y) / 0.6; }
+
 // The largest height change one proposal can make at the reference temperature: the
 // widest kernel of the bank at max_shift_cells (propose() below).
 inline double largest_proposal(const ProposalSettings& p, double metres_per_cell_shift) {
     double width = 1;
     if (!p.single_vertex)
-        for (const KernelShape& k : p.bank) width = std::max(width, std::sqrt(k.sigma_x * k.sigma_y) / 0.6);
+        for (const KernelShape& k : p.bank) width = std::max(width, kernel_width(k));
     return p.max_shift_cells * metres_per_cell_shift * width;
 }
 
@@ -186,9 +190,7 @@ public:
             apply_single_vertex(*surface_, ci, cj, float(s * unit_), m.overlay, trace_.vertex_bounds());
         } else {
             m.arm = bandit_.choose(rng);
-            const KernelShape& k = proposals_.bank[std::size_t(m.arm)];
-            // Slope of a Gaussian peaks at 0.6 amplitude / sigma: scale by the kernel's width.
-            const double width = std::sqrt(k.sigma_x * k.sigma_y) / 0.6;
+            const double width = kernel_width(proposals_.bank[std::size_t(m.arm)]);
             apply_kernel(*surface_, kernels_[std::size_t(m.arm)], ci, cj, float(s * unit_ * width), m.overlay,
                          trace_.vertex_bounds());
         }
@@ -390,7 +392,6 @@ private:
         return true;
     }
 
-    // Every sum the problem maintains, from the irradiance of the current surface.
     // The reach envelope (trace/incremental.hpp) for this problem's proposals: only the
     // height-field backend's walk reports the path heights it needs.
     void set_reach_margin() {
@@ -406,6 +407,7 @@ private:
         ++recentres_;
     }
 
+    // Every sum the problem maintains, from the irradiance of the current surface.
     void reset_sums(const Histogram& h) {
         image_.reset(h);
         penalty_sum_ = penalties_->full(*surface_);

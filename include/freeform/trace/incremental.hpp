@@ -258,25 +258,26 @@ struct ReachEnvelope {
     // Whether some vertex of `o` lies more than margin / 2 from its centre: time to
     // re-centre before the limits start to bind.
     bool spent(const HeightOverlay& o, int nx) const {
-        if (!active()) return false;
-        std::size_t k = 0;
-        for (int j = o.patch.j0; j <= o.patch.j1; ++j)
-            for (int i = o.patch.i0; i <= o.patch.i1; ++i, ++k)
-                if (std::abs(o.heights[k] - centre[std::size_t(j) * std::size_t(nx) + std::size_t(i)]) > 0.5f * margin)
-                    return true;
-        return false;
+        const float half = 0.5f * margin;
+        return active() && any_vertex(o, nx, [&](float h, std::size_t v) { return std::abs(h - centre[v]) > half; });
     }
 
     // Whether every vertex of `o` is inside its limits (a move made without them).
     bool holds(const HeightOverlay& o, int nx) const {
-        if (!active()) return true;
+        return !active() ||
+               !any_vertex(o, nx, [&](float h, std::size_t v) { return !(h >= vertex_lo[v] && h <= vertex_hi[v]); });
+    }
+
+private:
+    // Whether pred(height, vertex) holds for some vertex of `o`'s patch (row-major ids
+    // on a grid nx wide).
+    template <class Pred>
+    static bool any_vertex(const HeightOverlay& o, int nx, Pred&& pred) {
         std::size_t k = 0;
         for (int j = o.patch.j0; j <= o.patch.j1; ++j)
-            for (int i = o.patch.i0; i <= o.patch.i1; ++i, ++k) {
-                const std::size_t v = std::size_t(j) * std::size_t(nx) + std::size_t(i);
-                if (!(o.heights[k] >= vertex_lo[v] && o.heights[k] <= vertex_hi[v])) return false;
-            }
-        return true;
+            for (int i = o.patch.i0; i <= o.patch.i1; ++i, ++k)
+                if (pred(o.heights[k], std::size_t(j) * std::size_t(nx) + std::size_t(i))) return true;
+        return false;
     }
 };
 
@@ -425,6 +426,12 @@ struct RebuildSample {
     double seconds = 0;
     std::int64_t crossings = 0;
     std::int64_t admitted = 0;
+
+    // Whether the envelope is worth keeping: it leaves out at least half of the crossings
+    // (under light near the normal a path crosses a cell or two anyway).
+    bool envelope_pays() const { return crossings > 0 && 2 * admitted <= crossings; }
+    // The crossings a trace built now would list.
+    std::int64_t listed() const { return envelope_pays() ? admitted : crossings; }
 };
 
 inline RebuildSample sample_rebuild(const Heightmap& surface, const RaySet& rays, const PathParams& params,
@@ -1014,8 +1021,7 @@ private:
             return;
         }
         reach_.centre_on(*surface_);
-        const RebuildSample s = sample_rebuild(*surface_, *rays_, params_, 64, reach_.view());
-        if (!(s.crossings > 0 && 2 * s.admitted <= s.crossings)) reach_.clear();
+        if (!sample_rebuild(*surface_, *rays_, params_, 64, reach_.view()).envelope_pays()) reach_.clear();
     }
 
     const Heightmap* surface_;
