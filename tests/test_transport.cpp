@@ -704,16 +704,13 @@ TEST_CASE("transport start: a mirror focusing onto a receiver a third its width 
     CHECK(edge > 0.9);
 }
 
-TEST_CASE("transport start: under a point light each vertex is aimed by the ray that meets it (raised and lowered edges)") {
-    // The rays are aimed at the aperture in the plane w = 0 (scene/rays.hpp). Under a point
-    // light 0.2 m above a lens whose smooth, sloping target tilts its face, one edge of the
-    // face stands above that plane (the rays aimed at the aperture's edge meet the face a
-    // fraction of a cell inside it, and no ray lights the rim) and the opposite edge below
-    // it (the rays aimed at the aperture's last strip pass beside the face). With each
-    // vertex aimed as if its ray came through the point below it, an edge column got 61 %
-    // of its light here (a third on a terrain picture); with the goal of the ray that
-    // really meets it, and the lit part of each line of vertices stretched over the map,
-    // 98 %.
+TEST_CASE("transport start: under a point light a tilted face's raised and lowered edges are lit") {
+    // Under a point light 0.2 m above a lens whose smooth, sloping target tilts its face,
+    // one edge of the face stands above the plane w = 0 and the opposite edge below it.
+    // While the rays were aimed at that plane, the raised rim got no ray and the rays aimed
+    // at the lowered edge's last strip passed beside the face: with each vertex aimed as
+    // if its ray came through the point below it, an edge column got 61 % of its light.
+    // The rays are aimed at the face itself now (scene/rays.hpp, surface_aim): 98 %.
     ImageD target = smooth_target(100);
     for (int x = 0; x < 100; ++x) target.col(x) *= 2.5 - 0.02 * x;  // brighter on the left: a tilted face
     Scene s = lens_scene(0.2);
@@ -728,15 +725,12 @@ TEST_CASE("transport start: under a point light each vertex is aimed by the ray 
     CHECK(edge > 0.85);
 }
 
-TEST_CASE("transport start: under a point light a raised rim's edge vertex is aimed beyond the receiver's edge") {
+TEST_CASE("transport start: under a point light a raised rim's edge column gets its light") {
     // A mirror 0.2 m under a point light with a sloping target whose edges are dark and
     // striped (a photograph's, as above): the face tilts, and its raised edge stands above
-    // the plane the rays are aimed at, so the aperture's edge ray meets the face a fraction
-    // of a cell inside the rim. The normals there are interpolated between the edge
-    // vertex's goal and the next one's; with the edge vertex aimed at the edge (no
-    // farther: beyond the receiver the target is dark) the edge ray landed short of it and
-    // the edge column got 76 % of its light; with the unlit vertex aimed where the map
-    // continues beyond the edge, 99 %.
+    // the plane w = 0. Rays aimed at that plane met the face a fraction of a cell inside
+    // the rim, and the edge column got 76 % of its light (99 % once the unlit rim's goals
+    // continued the map). Rays aimed at the face light its rim: 99.7 %.
     ImageD target = smooth_target(100);
     for (int x = 0; x < 100; ++x) target.col(x) *= 2.5 - 0.02 * x;
     for (int y = 94; y < 100; ++y) target.row(y) *= y % 2 ? 0.3 : 0.6;
@@ -757,14 +751,11 @@ TEST_CASE("transport start: under a point light a raised rim's edge vertex is ai
     CHECK(edge > 0.9);
 }
 
-TEST_CASE("transport start: under a point light a round face's lit region is stretched radially over its aperture") {
+TEST_CASE("transport start: under a point light a round face's lowered rim is lit") {
     // A round mirror 0.1 m under a point light, a uniform target twice its width: its rim
-    // stands below the plane the rays are aimed at, so the rays aimed at the aperture's
-    // outer ring pass beside the face, and with each vertex aimed as if its ray came
-    // through the point below it the receiver's worst outermost row or column got 83 % of
-    // its light (65 % in a 200-pixel version of this scene). With the goals of the rays
-    // that really meet each vertex and the lit region stretched radially over the
-    // aperture (radial_plane_stretch), 97 %.
+    // stands below the plane w = 0, and rays aimed at that plane's outer ring passed beside
+    // the face: the receiver's worst outermost row or column got 83 % of its light (97 %
+    // once the goals followed the rays that met the face). Rays aimed at the face: 100 %.
     Scene s = testing::basic_scene(100);
     s.light.shape = PointLight{{0, 0, 0.1}, {0, 0, 0}, {}};
     s.surface.size = {0.06, 0.06};

@@ -40,6 +40,11 @@ struct StartReport {
     // A transport start's first solve and its reweighted second one (reweighted_transport_start),
     // exact tracer; the start is the better of the two (-1: not solved).
     double unreweighted_error = -1, reweighted_error = -1;
+    // Before that, the start whose source was weighed by the flat surface's power and the
+    // one solved again with it weighed by the fitted surface's (surface_weighted_start);
+    // the better goes on to the reweighting (-1: not solved, as under light along the
+    // surface's normal, where both weigh the same).
+    double plane_weighted_error = -1, surface_weighted_error = -1;
     double seconds = 0;              // solve, fit and evaluation
     int levels_planned = 0, levels_used = 0;
     std::string plan;                // the schedule's decision, in words
@@ -146,6 +151,7 @@ struct TransportStart {
     TransportMap map;  // report: the grid used, and the other grid's start error
     Heightmap surface;
     SurfaceEvaluation eval;
+    std::shared_ptr<const Heightmap> lit;  // the surface whose power weighed μ (TransportOptions::lit)
 };
 
 // One transport start of `initial`'s mesh: the map of `target_image` on the grid of
@@ -154,8 +160,10 @@ struct TransportStart {
 inline TransportStart transport_start_on(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                          const ImageD& judged_by, std::uint64_t seed, int threads, int max_grid,
                                          double cells_per_pixel, const WallStrips& walls,
-                                         std::shared_ptr<const Eigen::ArrayXXd> warm_phi = {}) {
+                                         std::shared_ptr<const Eigen::ArrayXXd> warm_phi = {},
+                                         std::shared_ptr<const Heightmap> lit = {}) {
     TransportOptions options;
+    options.lit = lit;
     options.ot.warm_phi = std::move(warm_phi);
     options.ot.threads = threads;
     options.cells_per_pixel = cells_per_pixel;
@@ -166,7 +174,7 @@ inline TransportStart transport_start_on(const Scene& scene, const Heightmap& in
     Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
     map.report = fitted;
     const SurfaceEvaluation eval = evaluate_surface(scene, surface, judged_by, seed, threads);
-    return TransportStart{std::move(map), std::move(surface), eval};
+    return TransportStart{std::move(map), std::move(surface), eval, std::move(lit)};
 }
 
 // The transport start of `initial`'s mesh on each grid of start_grid_cells_per_pixel (a
@@ -222,7 +230,7 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
     return std::move(*best);
 }
 
-// The start's second solve (docs/architecture.md §4b, step 4). The
+// The start's second solve (docs/architecture.md §4b, step 5). The
 // fitted surface does not put its light exactly where the map sends it: the least-squares
 // fit keeps only the part of the map a surface can make, and a near receiver, a point
 // light or a large deflection bends the rest (a round mirror 16° off a point light,
@@ -312,8 +320,35 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
     TransportStart second =
         transport_start_on(scene, initial, reweighted_target(target_image, lit), target_image, seed, threads, max_grid,
                            start.map.report.cells_per_pixel, start.map.strips,
-                           std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi));
+                           std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi), start.lit);
     reweighted_error = second.eval.error;
+    if (!(second.eval.error < start.eval.error)) return start;
+    second.map.report.other_cells_per_pixel = start.map.report.other_cells_per_pixel;
+    second.map.report.other_error = start.map.report.other_error;
+    second.map.report.wall_fraction = start.map.report.wall_fraction;
+    return second;
+}
+
+// The start's source weighed by its own surface (docs/architecture.md §4b). The map is
+// solved for the power a flat surface receives at each source point; the fitted surface
+// receives a different power there wherever the light is not along its normal: a point
+// light's distance and angle change with the height, and a tilted face catches more or
+// less of it. A mirror 6 cm above and 9 cm beside a point light, tilted 51 mm towards it,
+// started with its picture brighter at one end and darker at the other (error 0.080).
+// So the map is solved once more with μ weighed by the power the fitted surface receives
+// (TransportOptions::lit, warm from the first potential), the surface fitted again, and
+// the better of the two kept under the exact tracer. Light along the normal delivers the
+// same power to every slope: nothing to do, and nothing is solved.
+inline TransportStart surface_weighted_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
+                                             TransportStart start, std::uint64_t seed, int threads, int max_grid,
+                                             double& surface_weighted_error) {
+    const transport_detail::Optics optics(scene);
+    if (optics.light == 0 && optics.direction.x == 0 && optics.direction.y == 0) return start;
+    TransportStart second = transport_start_on(
+        scene, initial, target_image, target_image, seed, threads, max_grid, start.map.report.cells_per_pixel,
+        start.map.strips, std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi),
+        std::make_shared<const Heightmap>(start.surface));
+    surface_weighted_error = second.eval.error;
     if (!(second.eval.error < start.eval.error)) return start;
     second.map.report.other_cells_per_pixel = start.map.report.other_cells_per_pixel;
     second.map.report.other_error = start.map.report.other_error;
@@ -352,6 +387,10 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     std::optional<TransportStart> best;
     try {
         best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
+        start.report.plane_weighted_error = best->eval.error;
+        best = surface_weighted_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
+                                      start.report.surface_weighted_error);
+        if (start.report.surface_weighted_error < 0) start.report.plane_weighted_error = -1;
         start.report.unreweighted_error = best->eval.error;
         if (reweight)
             best = reweighted_transport_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,

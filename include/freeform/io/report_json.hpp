@@ -60,6 +60,10 @@ inline nlohmann::json start_report_json(const StartReport& s) {
     if (!s.fallback_reason.empty()) j["fallback_reason"] = s.fallback_reason;
     if (s.error >= 0) j["error"] = s.error, j["energy"] = s.energy;
     if (s.flat_error >= 0) j["flat_error"] = s.flat_error;
+    if (s.surface_weighted_error >= 0)
+        j["surface_weighted"] = {{"first_error", s.plane_weighted_error},
+                                 {"second_error", s.surface_weighted_error},
+                                 {"kept", s.surface_weighted_error < s.plane_weighted_error}};
     if (s.reweighted_error >= 0)
         j["reweighted"] = {{"first_error", s.unreweighted_error},
                            {"second_error", s.reweighted_error},

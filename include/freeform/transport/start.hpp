@@ -5,7 +5,9 @@
 //  1. Source density μ: the scene's own rays (generate_rays: uniform for collimated
 //     light, cos θ / r² and the intensity profile for a point, the disk's irradiance)
 //     land where a *flat* surface would send them; μ is that footprint on the receiver
-//     plane. Target density ν: the target image on the same grid.
+//     plane. Target density ν: the target image on the same grid. (The design's start
+//     solves once more with each ray weighed by the power the fitted surface receives
+//     above its plane point: TransportOptions::lit, design/start.hpp.)
 //  2. The quadratic-cost optimal map T from μ to ν (transport/grid_ot.hpp).
 //  3. Vertex (u, v) of the mesh, whose flat landing point is p, must send its light to
 //     T(p): the vector law of reflection (or refraction at the lens's front face, with
@@ -24,7 +26,6 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <numbers>
 #include <optional>
 #include <string>
 #include <variant>
@@ -104,6 +105,10 @@ struct TransportOptions {
     int fit_iterations = 4;        // map → normals → heights rounds (near field)
     OtOptions ot{};
     WallStrips strips{};           // a lens's wall strips (measure_wall_strips); none: the plain map
+    // The surface whose received power weighs μ (the start's second round, docs/
+    // architecture.md §4b): each source point keeps its flat landing, and carries what the
+    // ray aimed at this surface above it carries. None: the flat surface's power.
+    std::shared_ptr<const Heightmap> lit;
 };
 
 // What the transport start did, for metrics.json.
@@ -547,7 +552,9 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const double scale = g.source_scale, fp_cells = std::max(1.0, scale * scale * (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
     Light light = scene.light;
     light.rays = std::clamp<std::int64_t>(std::int64_t(options.rays_per_grid_cell * fp_cells), 4096, 4'000'000);
-    const RaySet rays = generate_rays(light, surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL));
+    std::vector<Vec2d> aims;
+    const RaySet rays =
+        generate_rays(light, options.lit ? *options.lit : surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL), &aims);
     Eigen::ArrayXXd mu = Eigen::ArrayXXd::Zero(g.ny, g.nx);
     double lost = 0, total = 0;
     // A lens's wall strips: their light is placed with the plain map (WallStrips).
@@ -556,10 +563,16 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const double spacing = std::sqrt(surface.size().x * surface.size().y / double(std::max<std::int64_t>(1, rays.size())));
     Eigen::ArrayXXd placed = Eigen::ArrayXXd::Zero(g.ny, g.nx);
     for (std::int64_t k = 0; k < rays.size(); ++k) {
-        const Vec3d o(rays.origin[std::size_t(k)]), d(rays.direction[std::size_t(k)]);
+        const Vec3d o(rays.origin[std::size_t(k)]);
         const double w = double(rays.weight[std::size_t(k)]);
         total += w;
-        const Vec3d s = o + d * (-o.z / d.z);
+        // The source point is labelled by the ray's flat landing: on a lit surface, that of
+        // the line from the source through the plane point the ray is aimed above.
+        Vec3d d(rays.direction[std::size_t(k)]), s = o + d * (-o.z / d.z);
+        if (options.lit) {
+            s = {aims[std::size_t(k)].x, aims[std::size_t(k)].y, 0.0};
+            if (optics.light != 0) d = normalize(s - o);
+        }
         double depth_u = 0, depth_v = 0;
         if (strips.any() && strips.depth(s, depth_u, depth_v)) {
             // A strip ray: its mirrored light is placed, not transported.
@@ -603,163 +616,29 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
 
 namespace transport_detail {
 
-// The rays are aimed at the aperture's points in the plane w = 0 (scene/rays.hpp), so the
-// ray that meets vertex (u, v) at height h came through the plane point where its
-// incoming line crosses w = 0: a point light's ray through a raised edge vertex was aimed
-// beyond the aperture, and no ray lights the rim of the face there (a strip of u·h/d;
-// 0.25 mm of a 0.4 mm cell for a lens edge 1.3 mm up under a point 0.2 m above: its
-// receiver column got a third of its light). So from the second fit round on, each
-// vertex takes the goal of the plane point its ray came through: the light goes where
-// the map sends the rays that really meet the surface there. Light along the surface's
-// normal meets it where it was aimed, and its goals do not change. An elliptical
-// aperture takes the radial stretch (radial_plane_stretch) under a point or disk light,
-// and keeps the plain goals under oblique collimated light: there a terrain on a round
-// mirror went 0.0371 → 0.0419 with the goals moved (docs/performance.md).
-inline bool rays_shift_with_height(const Optics& optics, const Heightmap& hm) {
-    if (hm.aperture() != Aperture::rect) return optics.light != 0;
-    return optics.light != 0 || optics.direction.x != 0 || optics.direction.y != 0;
-}
-
-// The radial form of the per-line stretch below, for an elliptical aperture, whose lines
-// of vertices do not end at the rectangle's edges. In coordinates scaled so that the
-// aperture is the unit disk around its centre, a boundary vertex (active, beside an
-// inactive one) at radius r whose ray came through the plane at radius r' says that, in
-// its direction, the face's lit region reaches R = r' / r of the aperture (the face's
-// rim is raised where R > 1, lowered where R < 1). R is averaged in 64 sectors (an empty
-// sector takes its nearest filled ones, interpolated), interpolated between them, and
-// every plane point's radius divided by min(R, 1): a lowered rim's lit region is
-// stretched over the aperture, and a raised rim's unlit vertices keep plane points
-// beyond it, where the map continues.
-inline void radial_plane_stretch(const Heightmap& hm, const std::vector<std::uint8_t>& active, Eigen::ArrayXXd& pu,
-                                 Eigen::ArrayXXd& pv) {
-    const int nx = hm.nx(), ny = hm.ny();
-    constexpr int sectors = 64;
-    const double cu = 0.5 * (hm.u_of(0) + hm.u_of(nx - 1)), cv = 0.5 * (hm.v_of(0) + hm.v_of(ny - 1));
-    const double a = 0.5 * (hm.u_of(nx - 1) - hm.u_of(0)), b = 0.5 * (hm.v_of(ny - 1) - hm.v_of(0));
-    if (!(a > 0 && b > 0)) return;
-    const auto sector_of = [&](double x, double y) {
-        const double t = (std::atan2(y, x) + std::numbers::pi) / (2 * std::numbers::pi) * sectors;
-        return std::clamp(t, 0.0, double(sectors) - 1e-9);
-    };
-    std::array<double, sectors> sum{}, count{};
-    const auto on = [&](int i, int j) { return i >= 0 && j >= 0 && i < nx && j < ny && active[std::size_t(j * nx + i)]; };
-    for (int j = 0; j < ny; ++j)
-        for (int i = 0; i < nx; ++i) {
-            if (!on(i, j) || (on(i - 1, j) && on(i + 1, j) && on(i, j - 1) && on(i, j + 1))) continue;
-            const double x = (hm.u_of(i) - cu) / a, y = (hm.v_of(j) - cv) / b, r = std::hypot(x, y);
-            if (!(r > 0.5)) continue;
-            const int k = int(sector_of(x, y));
-            sum[std::size_t(k)] += std::hypot((pu(j, i) - cu) / a, (pv(j, i) - cv) / b) / r;
-            count[std::size_t(k)] += 1;
-        }
-    const auto wrap = [](int k) { return std::size_t((k % sectors + sectors) % sectors); };
-    std::array<double, sectors> reach{};
-    for (int k = 0; k < sectors; ++k) {
-        int lo = 0, hi = 0;  // distances to the nearest filled sectors on either side (0: filled)
-        while (lo < sectors && count[wrap(k - lo)] == 0) ++lo;
-        if (lo >= sectors) return;  // no boundary vertex at all
-        while (count[wrap(k + hi)] == 0) ++hi;
-        const double rl = sum[wrap(k - lo)] / count[wrap(k - lo)], rh = sum[wrap(k + hi)] / count[wrap(k + hi)];
-        reach[std::size_t(k)] = lo + hi == 0 ? rl : (rl * hi + rh * lo) / (lo + hi);
-    }
-    for (int j = 0; j < ny; ++j)
-        for (int i = 0; i < nx; ++i) {
-            const double x = (pu(j, i) - cu) / a, y = (pv(j, i) - cv) / b;
-            const double t = sector_of(x, y) - 0.5;  // sector centres at k + 0.5
-            const int k0 = int(std::floor(t));
-            const double f = t - k0;
-            const double r = (1 - f) * reach[wrap(k0)] + f * reach[wrap(k0 + 1)];
-            const double scale = 1 / std::min(r, 1.0);
-            pu(j, i) = cu + a * x * scale, pv(j, i) = cv + b * y * scale;
-        }
-}
-
-// A raised rim: the first k vertices of a line (counted inwards from the face's edge)
-// stand so high that their rays came through the plane beyond the aperture, and no ray
-// lights them; the aperture's edge ray meets the face between vertex k - 1 and vertex k,
-// where the normals interpolate their goals. Aimed at the map's edge (the stretch clamps
-// their plane points to it) or at the receiver's edge (the border rule), they bend the
-// edge ray short of where the edge's light belongs: a terrain mirror's edge column under
-// a point light got 76 % of its light. So the unlit vertices take the map continued
-// straight from vertices k and k + 1, in the plane coordinate x of their rays (x < 0
-// beyond the edge), and the edge ray (x = 0) lands where the map's edge would. Continuing
-// from the border rule's goal instead (the receiver's edge, on a picture that fills it)
-// gave that column 98 % but cost a tilted lens's edge 98 % → 96 % (tests/
-// test_transport.cpp). `index(t)` and `inside(t)` give the t-th vertex from the edge and
-// its x.
-template <class Index, class Inside>
-void raised_rim_goals(std::vector<Vec3d>& goal, const std::vector<std::uint8_t>& mapped, int n, Index index,
-                      Inside inside) {
-    const int max_rim = std::min(8, n / 4);
-    int k = 0;
-    while (k < max_rim && inside(k) < 0) ++k;
-    if (k == 0 || k == max_rim) return;
-    for (int t = 0; t <= k + 1; ++t)
-        if (!mapped[index(t)]) return;
-    const double xk = inside(k), xk1 = inside(k + 1);
-    if (!(xk1 > xk)) return;
-    const Vec3d gk = goal[index(k)];
-    const Vec3d slope = (goal[index(k + 1)] - gk) / (xk1 - xk);
-    for (int t = 0; t < k; ++t) goal[index(t)] = gk + (inside(t) - xk) * slope;
-}
-
-// Each vertex's goal (surface frame) and whether the map reaches it; returns the
-// fraction of active vertices it does not. Without `heights`, the goal of the plane
-// point below the vertex; with them, of the plane point its ray came through, each line
-// of vertices' lit plane interval stretched over the aperture: where an edge vertex's
-// ray came from inside the rectangle, the rays aimed beyond it miss the face, and the
-// stretch gives the edge vertex the edge's goal again (clamped where the interval
-// reaches beyond the rectangle: the raised edge's unlit rim).
+// Each vertex's goal (surface frame): the goal of the plane point below it, and whether
+// the map reaches it; returns the fraction of active vertices it does not. The rays are
+// aimed at the surface itself (scene/rays.hpp, surface_aim), so the ray that meets a
+// vertex at any height is the one aimed above it. Until 2026-12-07 they were aimed at
+// the plane w = 0, a raised or lowered vertex was lit by the ray through another plane
+// point, and the goals followed that point, with a stretch of each line's (or a round
+// face's radial) lit interval over the aperture and a continuation of the map for a raised
+// rim's unlit vertices; none of it is needed now.
 inline double vertex_goals(const Optics& optics, const TransportMap& map, const Heightmap& hm,
-                           const std::vector<std::uint8_t>& active, const Eigen::ArrayXXd* heights,
-                           std::vector<Vec3d>& goal, std::vector<std::uint8_t>& mapped) {
+                           const std::vector<std::uint8_t>& active, std::vector<Vec3d>& goal,
+                           std::vector<std::uint8_t>& mapped) {
     const int nx = hm.nx(), ny = hm.ny();
-    // With heights, each vertex's ray's plane point.
-    Eigen::ArrayXXd pu, pv;
-    if (heights) {
-        pu.resize(ny, nx), pv.resize(ny, nx);
-        for (int j = 0; j < ny; ++j)
-            for (int i = 0; i < nx; ++i) {
-                const Vec3d s{hm.u_of(i), hm.v_of(j), (*heights)(j, i)};
-                const Vec3d d = optics.incoming(s);
-                const Vec3d q = d.z < 0 ? s - (s.z / d.z) * d : Vec3d{s.x, s.y, 0};
-                pu(j, i) = q.x, pv(j, i) = q.y;
-            }
-    }
-    // x of the line whose rays come through [max(lo, a0), min(hi, a1)], stretched over [a0, a1].
-    const auto stretch = [](double x, double lo, double hi, double a0, double a1) {
-        lo = std::max(lo, a0), hi = std::min(hi, a1);
-        return hi > lo ? a0 + (std::clamp(x, lo, hi) - lo) / (hi - lo) * (a1 - a0) : x;
-    };
-    const double u0 = hm.u_of(0), u1 = hm.u_of(nx - 1), v0 = hm.v_of(0), v1 = hm.v_of(ny - 1);
-    const bool rect = hm.aperture() == Aperture::rect;
-    if (heights && !rect) radial_plane_stretch(hm, active, pu, pv);
     int unmapped = 0, active_count = 0;
     for (int j = 0; j < ny; ++j)
         for (int i = 0; i < nx; ++i) {
             const std::size_t p = std::size_t(j * nx + i);
             active_count += active[p];
-            const Vec3d at = !heights ? Vec3d{hm.u_of(i), hm.v_of(j), 0}
-                             : rect   ? Vec3d{stretch(pu(j, i), pu(j, 0), pu(j, nx - 1), u0, u1),
-                                            stretch(pv(j, i), pv(0, i), pv(ny - 1, i), v0, v1), 0}
-                                      : Vec3d{pu(j, i), pv(j, i), 0};
-            const auto g = aim(optics, map.strips, map.ot, at);
+            const auto g = aim(optics, map.strips, map.ot, Vec3d{hm.u_of(i), hm.v_of(j), 0});
             mapped[p] = g ? 1 : 0;
             if (g) goal[p] = *g;
             else unmapped += active[p];
         }
     extrapolate_border_aims(goal, mapped, nx, ny, optics, map.ot);
-    if (heights && rect) {
-        const auto at = [nx](int i, int j) { return std::size_t(j) * std::size_t(nx) + std::size_t(i); };
-        for (int j = 0; j < ny; ++j) {
-            raised_rim_goals(goal, mapped, nx, [&](int t) { return at(t, j); }, [&](int t) { return pu(j, t) - u0; });
-            raised_rim_goals(goal, mapped, nx, [&](int t) { return at(nx - 1 - t, j); }, [&](int t) { return u1 - pu(j, nx - 1 - t); });
-        }
-        for (int i = 0; i < nx; ++i) {
-            raised_rim_goals(goal, mapped, ny, [&](int t) { return at(i, t); }, [&](int t) { return pv(t, i) - v0; });
-            raised_rim_goals(goal, mapped, ny, [&](int t) { return at(i, ny - 1 - t); }, [&](int t) { return v1 - pv(ny - 1 - t, i); });
-        }
-    }
     return active_count > 0 ? double(unmapped) / active_count : 0;
 }
 
@@ -778,8 +657,7 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     std::vector<Vec3d> goal(static_cast<std::size_t>(n));
     std::vector<std::uint8_t> mapped(std::size_t(n), 0);
     const std::vector<std::uint8_t> active = transport_detail::active_vertices(hm);
-    const bool shifted_rays = transport_detail::rays_shift_with_height(optics, hm);
-    report.unmapped_fraction = transport_detail::vertex_goals(optics, map, hm, active, nullptr, goal, mapped);
+    report.unmapped_fraction = transport_detail::vertex_goals(optics, map, hm, active, goal, mapped);
 
     // Heights whose edge difference quotients best match the mean slope of each edge's
     // ends, in least squares: the normal equations are a Neumann Poisson problem on the
@@ -793,7 +671,6 @@ inline Heightmap surface_from_transport(const Scene& scene, const TransportMap& 
     const double bound_mid = 0.5 * (double(spec.h_min) + double(spec.h_max));
     const double bound_range = double(spec.h_max) - double(spec.h_min);
     for (int round = 0; round < std::max(1, options.fit_iterations); ++round) {
-        if (round > 0 && shifted_rays) transport_detail::vertex_goals(optics, map, hm, active, &h, goal, mapped);
         for (int j = 0; j < ny; ++j)
             for (int i = 0; i < nx; ++i) {
                 const std::size_t p = std::size_t(j * nx + i);
