@@ -230,6 +230,16 @@ inline TransportStart best_transport_start(const Scene& scene, const Heightmap& 
     return std::move(*best);
 }
 
+// Of a start and its solve again (surface_weighted_start, reweighted_transport_start), the
+// better under the exact tracer; the second keeps the first's record of the grids tried.
+inline TransportStart better_start(TransportStart first, TransportStart second) {
+    if (!(second.eval.error < first.eval.error)) return first;
+    second.map.report.other_cells_per_pixel = first.map.report.other_cells_per_pixel;
+    second.map.report.other_error = first.map.report.other_error;
+    second.map.report.wall_fraction = first.map.report.wall_fraction;
+    return second;
+}
+
 // The start's second solve (docs/architecture.md §4b, step 5). The
 // fitted surface does not put its light exactly where the map sends it: the least-squares
 // fit keeps only the part of the map a surface can make, and a near receiver, a point
@@ -322,14 +332,10 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
                            start.map.report.cells_per_pixel, start.map.strips,
                            std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi), start.lit);
     reweighted_error = second.eval.error;
-    if (!(second.eval.error < start.eval.error)) return start;
-    second.map.report.other_cells_per_pixel = start.map.report.other_cells_per_pixel;
-    second.map.report.other_error = start.map.report.other_error;
-    second.map.report.wall_fraction = start.map.report.wall_fraction;
-    return second;
+    return better_start(std::move(start), std::move(second));
 }
 
-// The start's source weighed by its own surface (docs/architecture.md §4b). The map is
+// The start's source weighed by its own surface (docs/architecture.md §4b, step 4). The map is
 // solved for the power a flat surface receives at each source point; the fitted surface
 // receives a different power there wherever the light is not along its normal: a point
 // light's distance and angle change with the height, and a tilted face catches more or
@@ -349,11 +355,7 @@ inline TransportStart surface_weighted_start(const Scene& scene, const Heightmap
         start.map.strips, std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi),
         std::make_shared<const Heightmap>(start.surface));
     surface_weighted_error = second.eval.error;
-    if (!(second.eval.error < start.eval.error)) return start;
-    second.map.report.other_cells_per_pixel = start.map.report.other_cells_per_pixel;
-    second.map.report.other_error = start.map.report.other_error;
-    second.map.report.wall_fraction = start.map.report.wall_fraction;
-    return second;
+    return better_start(std::move(start), std::move(second));
 }
 
 // The start a design begins from: the scene's own, or the best transport start

@@ -526,6 +526,60 @@ inline OtGrid transport_grid(const Scene& scene, const FlatFootprint& fp, const 
     return g;
 }
 
+namespace transport_detail {
+
+// ν: the target image, area-averaged onto the grid g (image row 0 is the top, largest v).
+inline Eigen::ArrayXXd target_density(const Receiver& rec, const ImageD& target_image, const OtGrid& g) {
+    const ImageD flipped = target_image.colwise().reverse();
+    const double tu = rec.size.x / double(target_image.cols()), tv = rec.size.y / double(target_image.rows());
+    const Eigen::MatrixXd ox = overlap_1d(g.x0, g.hx, g.nx, -0.5 * rec.size.x, tu, int(target_image.cols()));
+    const Eigen::MatrixXd oy = overlap_1d(g.y0, g.hy, g.ny, -0.5 * rec.size.y, tv, int(target_image.rows()));
+    return (oy * flipped.matrix() * ox.transpose()).array().max(0.0);
+}
+
+// μ: the rays' weights splatted at their flat landings on grid g (scaled by its
+// source_scale), a lens's wall-strip rays placed where the walls mirror them (`placed`),
+// and the weight whose flat landing misses the receiver plane (`lost`) of the `total`.
+struct SourceDensity {
+    Eigen::ArrayXXd mu, placed;
+    double lost = 0, total = 0;
+};
+
+// Each ray is labelled by its flat landing: that of its own line through the plane w = 0,
+// or, with `aims` (rays aimed at a lit surface: TransportOptions::lit), that of the line
+// from its source through the plane point it is aimed above (collimated light keeps its
+// direction). `spacing`: the rays' spacing on the face (place_strip_ray).
+inline SourceDensity source_density(const Optics& optics, const OtGrid& g, const RaySet& rays,
+                                    const std::vector<Vec2d>* aims, const WallStrips& strips, double spacing) {
+    SourceDensity out{Eigen::ArrayXXd::Zero(g.ny, g.nx), Eigen::ArrayXXd::Zero(g.ny, g.nx)};
+    const double scale = g.source_scale;
+    for (std::int64_t k = 0; k < rays.size(); ++k) {
+        const Vec3d o(rays.origin[std::size_t(k)]);
+        const double w = double(rays.weight[std::size_t(k)]);
+        out.total += w;
+        Vec3d d(rays.direction[std::size_t(k)]), s = o + d * (-o.z / d.z);
+        if (aims) {
+            s = {(*aims)[std::size_t(k)].x, (*aims)[std::size_t(k)].y, 0.0};
+            if (optics.light != 0) d = normalize(s - o);
+        }
+        double depth_u = 0, depth_v = 0;
+        if (strips.any() && strips.depth(s, depth_u, depth_v)) {
+            // A strip ray: its mirrored light is placed, not transported.
+            place_strip_ray(out.placed, g, optics, strips, s, spacing, w);
+            continue;
+        }
+        const auto p = optics.flat_landing(s, d);
+        if (!p) {
+            out.lost += w;
+            continue;
+        }
+        splat(out.mu, g, scale * p->x, scale * p->y, w);
+    }
+    return out;
+}
+
+}  // namespace transport_detail
+
 // Solves the transport from the light's flat-surface footprint to the target image
 // (relative irradiance, any resolution). `surface` gives the aperture (its mask).
 inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface, const ImageD& target_image,
@@ -541,12 +595,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const OtGrid g = transport_grid(scene, fp, options);
     const double cell = g.hx;
 
-    // ν: the target, area-averaged onto the grid (image row 0 is the top, largest v).
-    const ImageD flipped = target_image.colwise().reverse();
-    const double tu = rec.size.x / double(target_image.cols()), tv = rec.size.y / double(target_image.rows());
-    const Eigen::MatrixXd ox = transport_detail::overlap_1d(g.x0, g.hx, g.nx, -0.5 * rec.size.x, tu, int(target_image.cols()));
-    const Eigen::MatrixXd oy = transport_detail::overlap_1d(g.y0, g.hy, g.ny, -0.5 * rec.size.y, tv, int(target_image.rows()));
-    const Eigen::ArrayXXd nu = (oy * flipped.matrix() * ox.transpose()).array().max(0.0);
+    const Eigen::ArrayXXd nu = transport_detail::target_density(rec, target_image, g);
 
     // μ: the light's rays, landed by the flat surface.
     const double scale = g.source_scale, fp_cells = std::max(1.0, scale * scale * (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
@@ -555,37 +604,14 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     std::vector<Vec2d> aims;
     const RaySet rays =
         generate_rays(light, options.lit ? *options.lit : surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL), &aims);
-    Eigen::ArrayXXd mu = Eigen::ArrayXXd::Zero(g.ny, g.nx);
-    double lost = 0, total = 0;
     // A lens's wall strips: their light is placed with the plain map (WallStrips).
     WallStrips strips = options.strips;
     if (!strips.placement) strips.margin = {};
     const double spacing = std::sqrt(surface.size().x * surface.size().y / double(std::max<std::int64_t>(1, rays.size())));
-    Eigen::ArrayXXd placed = Eigen::ArrayXXd::Zero(g.ny, g.nx);
-    for (std::int64_t k = 0; k < rays.size(); ++k) {
-        const Vec3d o(rays.origin[std::size_t(k)]);
-        const double w = double(rays.weight[std::size_t(k)]);
-        total += w;
-        // The source point is labelled by the ray's flat landing: on a lit surface, that of
-        // the line from the source through the plane point the ray is aimed above.
-        Vec3d d(rays.direction[std::size_t(k)]), s = o + d * (-o.z / d.z);
-        if (options.lit) {
-            s = {aims[std::size_t(k)].x, aims[std::size_t(k)].y, 0.0};
-            if (optics.light != 0) d = normalize(s - o);
-        }
-        double depth_u = 0, depth_v = 0;
-        if (strips.any() && strips.depth(s, depth_u, depth_v)) {
-            // A strip ray: its mirrored light is placed, not transported.
-            transport_detail::place_strip_ray(placed, g, optics, strips, s, spacing, w);
-            continue;
-        }
-        const auto p = optics.flat_landing(s, d);
-        if (!p) {
-            lost += w;
-            continue;
-        }
-        transport_detail::splat(mu, g, scale * p->x, scale * p->y, w);
-    }
+    const transport_detail::SourceDensity source =
+        transport_detail::source_density(optics, g, rays, options.lit ? &aims : nullptr, strips, spacing);
+    const Eigen::ArrayXXd& mu = source.mu;
+    const Eigen::ArrayXXd& placed = source.placed;
     if (!(mu.sum() > 0))
         throw InputError("surface.initial: \"transport\": no light from the aperture reaches the receiver plane");
 
@@ -609,7 +635,7 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     m.report.ot_iterations = m.ot.iterations;
     m.report.ot_residual = m.ot.residual;
     m.report.ot_seconds = std::chrono::duration<double>(clock::now() - t0).count();
-    m.report.unmapped_fraction = total > 0 ? lost / total : 0;
+    m.report.unmapped_fraction = source.total > 0 ? source.lost / source.total : 0;
     m.report.used = true;
     return m;
 }
