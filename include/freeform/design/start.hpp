@@ -389,10 +389,10 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     std::optional<TransportStart> best;
     try {
         best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
-        start.report.plane_weighted_error = best->eval.error;
+        const double plane_weighted = best->eval.error;
         best = surface_weighted_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
                                       start.report.surface_weighted_error);
-        if (start.report.surface_weighted_error < 0) start.report.plane_weighted_error = -1;
+        if (start.report.surface_weighted_error >= 0) start.report.plane_weighted_error = plane_weighted;
         start.report.unreweighted_error = best->eval.error;
         if (reweight)
             best = reweighted_transport_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,

@@ -601,9 +601,9 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     const double scale = g.source_scale, fp_cells = std::max(1.0, scale * scale * (fp_hi_u - fp_lo_u) * (fp_hi_v - fp_lo_v) / (cell * cell));
     Light light = scene.light;
     light.rays = std::clamp<std::int64_t>(std::int64_t(options.rays_per_grid_cell * fp_cells), 4096, 4'000'000);
-    std::vector<Vec2d> aims;
-    const RaySet rays =
-        generate_rays(light, options.lit ? *options.lit : surface, rec, hash_combine(seed, 0x7a2a5b0e1ULL), &aims);
+    std::vector<Vec2d> aims;  // only on a lit surface: the plain solve labels rays by their own lines
+    const RaySet rays = generate_rays(light, options.lit ? *options.lit : surface, rec,
+                                      hash_combine(seed, 0x7a2a5b0e1ULL), options.lit ? &aims : nullptr);
     // A lens's wall strips: their light is placed with the plain map (WallStrips).
     WallStrips strips = options.strips;
     if (!strips.placement) strips.margin = {};
