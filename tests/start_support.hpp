@@ -15,7 +15,7 @@ namespace freeform::testing {
 // sanitizers.
 inline DesignStart first_solve_start(const Scene& s, Heightmap initial, const ImageD& target, std::uint64_t seed,
                                      int threads) {
-    return make_design_start(s, std::move(initial), target, seed, threads, min_start_grid, false);
+    return make_design_start(s, std::move(initial), target, seed, threads, min_start_grid, no_second_solves);
 }
 
 }  // namespace freeform::testing

@@ -9,6 +9,7 @@
 // ±2 mm, so that reflected rays spread and some cross several cells.
 //
 // Names read tracer-or-operation/parameters/.../threads:N, for example
+//   walk/side-lamp/401/tiles                   the walk's block skip against walk/side-lamp/401/cells
 //   trace/heightfield/collimated/phong/101/threads:2   whole path, items = rays
 //   retrace/heightfield/overlay/point/101              rays a 7 x 7 move retraces, items = rays
 //   refit/embree/patch7x7/401                          surface_changed() of a 7 x 7 vertex patch
@@ -231,6 +232,69 @@ void retrace_overlay(benchmark::State& state, LightKind light, int mesh) {
     state.counters["rays_per_move"] = double(rays) / double(state.iterations());
 }
 
+// The walk's block skip (heightfield_kernel.hpp, skip_tile): every ray of a deep, oblique
+// case traced through the plain view (every cell tested) and through the tiled one
+// (TileRanges attached, as HeightfieldTracer traces), one thread, the packet path where
+// the build has it. The side lamp's geometry (benchmarks/results/reach_envelope/side-lamp.json):
+// a point light at (0, -9, 6) cm beside a 0.1 m mirror that tilts 51 mm towards it,
+// ±30 mm of bounds, the bumps on top; the same records either way (tests/test_packet.cpp).
+struct DeepCase {
+    Scene scene;
+    Heightmap surface;
+    RaySet rays;
+    PathParams params;
+};
+
+const DeepCase& deep_case(int mesh) {
+    static std::map<int, std::unique_ptr<DeepCase>> cache;
+    auto& slot = cache[mesh];
+    if (!slot) {
+        auto c = std::make_unique<DeepCase>();
+        Scene& s = c->scene;
+        s = bench_scene(LightKind::point, 0.75);
+        s.light.shape = PointLight{{0, -0.09, 0.06}, {}, {}};
+        s.surface.h_min = -0.03, s.surface.h_max = 0.03;
+        c->surface = Heightmap(mesh, mesh, s.surface.size, s.surface.h_min, s.surface.h_max, s.surface.frame);
+        bumpy(c->surface);
+        std::vector<float> h = c->surface.heights();
+        for (int j = 0; j < mesh; ++j)  // rising away from the light: the face turns to it
+            for (int i = 0; i < mesh; ++i) h[std::size_t(j) * mesh + i] += float(0.51 * c->surface.v_of(j));
+        c->surface.set_heights(h);
+        c->rays = generate_rays(s.light, c->surface, s.receiver, 1);
+        c->params = make_path_params(s);
+        slot = std::move(c);
+    }
+    return *slot;
+}
+
+void walk_deep(benchmark::State& state, int mesh, bool tiles) {
+    const DeepCase& c = deep_case(mesh);
+    const HeightfieldView plain = c.surface.view();
+    for (auto _ : state) {
+        const TileRanges ranges(plain);  // built each time, as each trace builds its own
+        const HeightfieldView hf = tiles ? ranges.attach(plain) : plain;
+        std::int64_t depth = 0;
+        if (packet::use_packets(c.params)) {
+            const hf_detail::Grid g = hf_detail::grid_of(hf);
+            RayRecord rec[packet::width];
+            packet::NoLaneVisitor none;
+            for (std::int64_t k0 = 0; k0 < c.rays.size(); k0 += packet::width) {
+                const int n = int(std::min<std::int64_t>(packet::width, c.rays.size() - k0));
+                packet::trace_rays(hf, g, c.params, c.rays.origin.data() + k0, c.rays.direction.data() + k0, n, rec,
+                                   none);
+                for (int l = 0; l < n; ++l) depth += rec[l].depth;
+            }
+        } else {
+            for (std::int64_t k = 0; k < c.rays.size(); ++k)
+                depth += trace_heightfield_ray(hf, c.params, c.rays.origin[std::size_t(k)],
+                                               c.rays.direction[std::size_t(k)], NoCellVisitor{})
+                             .depth;
+        }
+        benchmark::DoNotOptimize(depth);
+    }
+    state.SetItemsProcessed(state.iterations() * c.rays.size());
+}
+
 void register_all() {
     const int threads = all_threads();
     std::vector<int> thread_counts{1};
@@ -267,6 +331,13 @@ void register_all() {
             benchmark::RegisterBenchmark(name.c_str(), retrace_overlay, light, mesh)
                 ->UseRealTime()
                 ->Unit(benchmark::kMicrosecond);
+        }
+    for (int mesh : {201, 401})
+        for (const bool tiles : {false, true}) {
+            const std::string name = "walk/side-lamp/" + std::to_string(mesh) + (tiles ? "/tiles" : "/cells");
+            benchmark::RegisterBenchmark(name.c_str(), walk_deep, mesh, tiles)
+                ->UseRealTime()
+                ->Unit(benchmark::kMillisecond);
         }
 #if defined(FREEFORM_WITH_EMBREE)
     for (int mesh : meshes)

@@ -43,8 +43,10 @@ struct StartReport {
     // Before that, the start whose source was weighed by the flat surface's power and the
     // one solved again with it weighed by the fitted surface's (surface_weighted_start);
     // the better goes on to the reweighting (-1: not solved, as under light along the
-    // surface's normal, where both weigh the same).
-    double plane_weighted_error = -1, surface_weighted_error = -1;
+    // surface's normal, where both weigh the same, or where the budget chose the
+    // reweighting). `lit_power_change`: the share of the light the fitted surface's power
+    // moves (transport/start.hpp), which made that choice (-1: not measured).
+    double plane_weighted_error = -1, surface_weighted_error = -1, lit_power_change = -1;
     double seconds = 0;              // solve, fit and evaluation
     int levels_planned = 0, levels_used = 0;
     std::string plan;                // the schedule's decision, in words
@@ -279,32 +281,53 @@ inline ImageD reweighted_target(const ImageD& target, const CellMeans& lit) {
     return out;
 }
 
-// Whether a design of `scene` with `time_budget` seconds (0: none) affords the second
-// solve on a grid of at most `max_grid` a side: the first solves and the second, by
-// start_grid_limit's fixed rates, within reweight_budget_share of the budget. The second
-// solve starts from the first's potential (OtOptions::warm_phi: 6 to 11 iterations where
-// a cold solve takes 14 to 18), so its grid is counted at warm_solve_fraction of a cold
-// solve, and its irradiance at a quarter of the tracer's rate per ray (cell means, no
-// objective). The share is larger than the grid's (start_budget_share): the reweighted
-// start gains on every scene measured, and on a large receiver it is worth more than the
-// annealing it displaces (a 512² photograph in 120 s: 68 s of start, designed surface
-// 0.0146 against 0.0169 for the first start, which annealing did not improve on;
-// docs/performance.md, "The reweighted start"). The letter E at 20 s (a 9 s start, 19 s on
-// a loaded machine, where annealing then never ran) still goes without. Fixed rates, so
-// the decision depends on the scene and options alone.
+// Which of the start's second solves a design of `scene` with `time_budget` seconds (0:
+// none) affords on a grid of at most `max_grid` a side: the first solves and the second
+// ones, by start_grid_limit's fixed rates, within reweight_budget_share of the budget. A
+// second solve starts from the first's potential (OtOptions::warm_phi: 6 to 11 iterations
+// where a cold solve takes 14 to 18), so its grid is counted at warm_solve_fraction of a
+// cold solve. The surface-weighted solve (surface_weighted_start) adds the exact tracer's
+// judgement of its surface at the tracer's rate, and is counted only where it runs
+// (power_depends_on_shape); the reweighted one (reweighted_transport_start) adds its
+// irradiance at a quarter of that rate per ray (cell means, no objective). The share is
+// larger than the grid's (start_budget_share): the reweighted start gains on every scene
+// measured, and on a large receiver it is worth more than the annealing it displaces (a
+// 512² photograph in 120 s: 68 s of start, designed surface 0.0146 against 0.0169 for the
+// first start, which annealing did not improve on; docs/performance.md, "The reweighted
+// start"). The letter E at 20 s (a 9 s start, 19 s on a loaded machine, where annealing
+// then never ran) still goes without. Fixed rates, so the decision depends on the scene
+// and options alone.
 inline constexpr double warm_solve_fraction = 0.55, reweight_budget_share = 2.0 / 3.0;
-inline bool start_reweight_fits(const Scene& scene, double time_budget, int max_grid) {
-    if (!(time_budget > 0)) return true;
+struct SecondSolves {
+    bool surface_weighted = true;  // the first solves and the surface-weighted one fit
+    bool reweighted = true;        // the first solves and the reweighted one fit
+    bool both = true;              // all of them fit
+};
+inline constexpr SecondSolves no_second_solves{false, false, false};
+inline SecondSolves start_second_solves(const Scene& scene, double time_budget, int max_grid) {
+    if (!(time_budget > 0)) return {};
     const double pixels_side = double(std::max(scene.receiver.width, scene.receiver.height));
     const double fine = std::min(double(max_grid), start_grid_cells_per_pixel[0] * pixels_side);
     const double coarse = std::min(fine, start_grid_cells_per_pixel[1] * pixels_side);
     const double rays = double(ray_budget(scene.light, scene.receiver));
     const double lit_rays = reweight_rays_per_cell * double(scene.receiver.cells());
     const double first = start_seconds_per_cell * (fine * fine + coarse * coarse) + start_seconds_per_ray * rays;
-    const double second =
-        warm_solve_fraction * start_seconds_per_cell * fine * fine + 0.25 * start_seconds_per_ray * lit_rays;
-    return first + second <= reweight_budget_share * time_budget;
+    const double warm = warm_solve_fraction * start_seconds_per_cell * fine * fine;
+    const double weighted = power_depends_on_shape(scene) ? warm + start_seconds_per_ray * rays : 0;
+    const double reweighted = warm + 0.25 * start_seconds_per_ray * lit_rays;
+    const double budget = reweight_budget_share * time_budget;
+    return {first + weighted <= budget, first + reweighted <= budget, first + weighted + reweighted <= budget};
 }
+
+// Where only one second solve fits, the surface-weighted one is solved when the fitted
+// surface's power moves at least this share of the first start's error (lit_power_change
+// against that error, both Σ|R − T| / 2N), the reweighted one otherwise. The
+// surface-weighted solve takes off what the power moved; the reweighted one's damped step
+// (the square root of the ratio) about half of an error of smooth brightness, the power's
+// included. The side lamp (a point light beside a tilted mirror) gained 0.12 from the
+// first and 0.004 from the second, the point-light example 0.001 and 0.003
+// (docs/performance.md, "Where the rays are aimed").
+inline constexpr double surface_weight_share = 0.5;
 
 // The designed surface's cell means: the height field traced with its Phong patches.
 inline CellMeans designed_cell_means(const Scene& scene, const Heightmap& surface, const ImageD& target,
@@ -344,12 +367,10 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
 // So the map is solved once more with μ weighed by the power the fitted surface receives
 // (TransportOptions::lit, warm from the first potential), the surface fitted again, and
 // the better of the two kept under the exact tracer. Light along the normal delivers the
-// same power to every slope: nothing to do, and nothing is solved.
+// same power to every slope (power_depends_on_shape): the caller solves nothing there.
 inline TransportStart surface_weighted_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                              TransportStart start, std::uint64_t seed, int threads, int max_grid,
                                              double& surface_weighted_error) {
-    const transport_detail::Optics optics(scene);
-    if (optics.light == 0 && optics.direction.x == 0 && optics.direction.y == 0) return start;
     TransportStart second = transport_start_on(
         scene, initial, target_image, target_image, seed, threads, max_grid, start.map.report.cells_per_pixel,
         start.map.strips, std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi),
@@ -360,12 +381,13 @@ inline TransportStart surface_weighted_start(const Scene& scene, const Heightmap
 
 // The start a design begins from: the scene's own, or the best transport start
 // (best_transport_start) on grids of at most `max_grid` cells a side (start_grid_limit of
-// the design's time budget), solved again for its reweighted target when `reweight`
-// (reweighted_transport_start; start_reweight_fits of the budget), judged against the
-// flat surface.
+// the design's time budget), solved again with its source weighed by its own surface
+// (surface_weighted_start) and for its reweighted target (reweighted_transport_start) as
+// `solves` affords (start_second_solves of the budget; where only one fits, the choice of
+// surface_weight_share), judged against the flat surface.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      std::uint64_t seed, int threads, int max_grid = min_start_grid,
-                                     bool reweight = true) {
+                                     SecondSolves solves = {}) {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
     DesignStart start;
@@ -389,12 +411,18 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     std::optional<TransportStart> best;
     try {
         best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
-        const double plane_weighted = best->eval.error;
-        best = surface_weighted_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
-                                      start.report.surface_weighted_error);
-        if (start.report.surface_weighted_error >= 0) start.report.plane_weighted_error = plane_weighted;
+        bool weighed = false;
+        if (solves.surface_weighted && power_depends_on_shape(scene)) {
+            StartReport& r = start.report;
+            r.lit_power_change = lit_power_change(scene, initial, best->surface, hash_combine(seed, 0x6c6974ULL));
+            weighed = solves.both || r.lit_power_change >= surface_weight_share * best->eval.error;
+            r.plane_weighted_error = best->eval.error;
+            if (weighed)
+                best = surface_weighted_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
+                                              r.surface_weighted_error);
+        }
         start.report.unreweighted_error = best->eval.error;
-        if (reweight)
+        if (solves.both || (solves.reweighted && !weighed))
             best = reweighted_transport_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
                                               start.report.reweighted_error);
     } catch (const InputError& e) {
@@ -423,14 +451,14 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
 }
 
 // The start of a design with `options`: its seed, and the transport grid and second solve
-// its time budget affords (start_grid_limit, start_reweight_fits). The designer, a
+// its time budget affords (start_grid_limit, start_second_solves). The designer, a
 // start-only design and a render of a scene's start all make it here, so that they make
 // the same start.
 inline DesignStart make_design_start(const Scene& scene, Heightmap initial, const ImageD& target_image,
                                      const DesignOptions& options, int threads) {
     const int max_grid = start_grid_limit(scene, options.time_budget);
     return make_design_start(scene, std::move(initial), target_image, options.seed, threads, max_grid,
-                             start_reweight_fits(scene, options.time_budget, max_grid));
+                             start_second_solves(scene, options.time_budget, max_grid));
 }
 
 }  // namespace freeform

@@ -60,10 +60,15 @@ inline nlohmann::json start_report_json(const StartReport& s) {
     if (!s.fallback_reason.empty()) j["fallback_reason"] = s.fallback_reason;
     if (s.error >= 0) j["error"] = s.error, j["energy"] = s.energy;
     if (s.flat_error >= 0) j["flat_error"] = s.flat_error;
-    if (s.surface_weighted_error >= 0)
-        j["surface_weighted"] = {{"first_error", s.plane_weighted_error},
-                                 {"second_error", s.surface_weighted_error},
-                                 {"kept", s.surface_weighted_error < s.plane_weighted_error}};
+    if (s.lit_power_change >= 0) {
+        // design/start.hpp, surface_weight_share: "solved" false where the budget chose the reweighting
+        nlohmann::json& w = j["surface_weighted"];
+        w = {{"power_change", s.lit_power_change},
+             {"first_error", s.plane_weighted_error},
+             {"solved", s.surface_weighted_error >= 0}};
+        if (s.surface_weighted_error >= 0)
+            w["second_error"] = s.surface_weighted_error, w["kept"] = s.surface_weighted_error < s.plane_weighted_error;
+    }
     if (s.reweighted_error >= 0)
         j["reweighted"] = {{"first_error", s.unreweighted_error},
                            {"second_error", s.reweighted_error},

@@ -337,7 +337,7 @@ inline void pack_start(Packer& p, const SharedStart& s) {
     pack_transport_report(p, r.transport);
     p.put(r.error), p.put(r.energy), p.put(r.flat_error), p.put(r.seconds);
     p.put(r.unreweighted_error), p.put(r.reweighted_error);
-    p.put(r.plane_weighted_error), p.put(r.surface_weighted_error);
+    p.put(r.plane_weighted_error), p.put(r.surface_weighted_error), p.put(r.lit_power_change);
     p.put(r.levels_planned), p.put(r.levels_used);
     p.put_string(r.plan);
     p.put(s.transport), p.put(s.skip);
@@ -359,6 +359,7 @@ inline SharedStart unpack_start(Unpacker& u) {
     r.seconds = u.get<double>();
     r.unreweighted_error = u.get<double>(), r.reweighted_error = u.get<double>();
     r.plane_weighted_error = u.get<double>(), r.surface_weighted_error = u.get<double>();
+    r.lit_power_change = u.get<double>();
     r.levels_planned = u.get<int>(), r.levels_used = u.get<int>();
     r.plan = u.get_string();
     s.transport = u.get<bool>();

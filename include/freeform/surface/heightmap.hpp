@@ -47,6 +47,15 @@ struct HeightSnapshot {
 };
 
 // Everything a tracing kernel needs to know about a height field, as plain data.
+// The height range of each tile of cells, for the walk's block skip (trace/heightfield_kernel.hpp,
+// tile_ranges): tile (ti, tj) holds the cells ci >> tile_shift == ti, cj >> tile_shift == tj,
+// and lo/hi[tj * tiles_x + ti] bound the heights of their vertices. lo null: no tiles.
+struct TileView {
+    const float* lo = nullptr;
+    const float* hi = nullptr;
+    int tiles_x = 0;
+};
+
 struct HeightfieldView {
     const float* h = nullptr;          // nx*ny heights
     const Vec3* n = nullptr;           // nx*ny unit vertex normals (surface frame)
@@ -55,6 +64,7 @@ struct HeightfieldView {
     float u0 = 0, v0 = 0;  // position of vertex (0, 0)
     float du = 0, dv = 0;  // grid spacing
     float h_min = 0, h_max = 0;
+    TileView tiles{};  // a plain trace's tile ranges (HeightfieldTracer); none by default
 
     FREEFORM_HD float height(int i, int j) const { return h[j * nx + i]; }
     FREEFORM_HD Vec3 normal(int i, int j) const { return n[j * nx + i]; }

@@ -15,6 +15,43 @@
 
 namespace freeform {
 
+// The tile height ranges of a height field (TileView; the walk's block skip,
+// heightfield_kernel.hpp): each tile's lowest and highest vertex, the vertices on its
+// borders included. One pass over the heights, made for each plain trace.
+struct TileRanges {
+    std::vector<float> lo, hi;
+    int tiles_x = 0;
+
+    explicit TileRanges(const HeightfieldView& hf) {
+        constexpr int cells = 1 << hf_detail::tile_shift;
+        const int cx = hf.nx - 1, cy = hf.ny - 1;
+        tiles_x = (cx + cells - 1) / cells;
+        const int tiles_y = (cy + cells - 1) / cells;
+        lo.assign(std::size_t(tiles_x) * std::size_t(tiles_y), INFINITY);
+        hi.assign(lo.size(), -INFINITY);
+        for (int j = 0; j < hf.ny; ++j) {
+            // A vertex on a tile border belongs to the tiles on both sides.
+            const int tj0 = std::max(0, (j - 1) >> hf_detail::tile_shift);
+            const int tj1 = std::min(tiles_y - 1, j >> hf_detail::tile_shift);
+            for (int i = 0; i < hf.nx; ++i) {
+                const float h = hf.height(i, j);
+                const int ti0 = std::max(0, (i - 1) >> hf_detail::tile_shift);
+                const int ti1 = std::min(tiles_x - 1, i >> hf_detail::tile_shift);
+                for (int tj = tj0; tj <= tj1; ++tj)
+                    for (int ti = ti0; ti <= ti1; ++ti) {
+                        const std::size_t k = std::size_t(tj) * std::size_t(tiles_x) + std::size_t(ti);
+                        lo[k] = std::min(lo[k], h), hi[k] = std::max(hi[k], h);
+                    }
+            }
+        }
+    }
+    // `hf` with these tiles.
+    HeightfieldView attach(HeightfieldView hf) const {
+        hf.tiles = {lo.data(), hi.data(), tiles_x};
+        return hf;
+    }
+};
+
 class HeightfieldTracer {
 public:
     HeightfieldTracer(const Heightmap& surface, const RaySet& rays, const PathParams& params)
@@ -34,7 +71,8 @@ public:
         const int chunks = thread_count(policy);
         std::vector<Histogram> partial(std::size_t(chunks), Histogram(out.width, out.height));
         std::vector<TraceTotals> partial_totals(static_cast<std::size_t>(chunks));
-        const HeightfieldView hf = surface_->view();
+        const TileRanges tiles(surface_->view());
+        const HeightfieldView hf = tiles.attach(surface_->view());
         const RaySet& r = *rays_;
         for_each_chunk(policy, r.size(), chunks, [&](int c, std::int64_t begin, std::int64_t end) {
             Histogram& h = partial[std::size_t(c)];

@@ -8,6 +8,7 @@
 // height range over the cell is skipped after four loads.
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "../core/hd.hpp"
 #include "../surface/heightmap.hpp"
@@ -294,6 +295,74 @@ FREEFORM_HD FREEFORM_FORCE_INLINE bool grid_segment(const View& hf, const Grid& 
     return true;
 }
 
+// The walk's block skip: over a tile of cells (TileView) whose heights all lie above or
+// below the segment's height range across the tile, cell_hit would reject every cell for
+// its height range, so the walk jumps to where it leaves the tile instead of testing them.
+// A ray that slants through a deep slab (a point light beside its mirror: some 240 cells
+// of a 60 mm slab) meets only the few cells near its hit; the rest are skipped in eights.
+// The jump lands in the cell, with the crossing times, that the cell-by-cell walk would
+// reach: every crossing time is computed from its grid line as that walk does, and the
+// lines of the other axis crossed on the way are stepped over one by one, by the walk's
+// own comparison. So a walk with tiles finds the same hit, bit for bit
+// (tests/test_heightfield.cpp), and only plain traces use it: a visitor of crossed cells
+// (the incremental evaluation's index) must see every cell.
+inline constexpr int tile_shift = 3;  // tiles of 8 x 8 cells
+
+struct NoSkip {
+    static constexpr bool enabled = false;
+};
+struct TileSkip {
+    static constexpr bool enabled = true;
+    TileView tiles;
+    float ez = 0, dz = 0;  // the segment's height at its start, and per unit t
+    float z_pad = 0;       // cell_hit's allowance, taken twice: the tile's test never rejects what a cell's keeps
+};
+
+// The DDA's state between cells: the cell, where the walk entered it, and the next grid
+// line on each axis with the t of crossing it.
+struct DdaState {
+    int ci, cj;
+    float tc, line_i, line_j, tn_i, tn_j;
+};
+
+// Tests the tile of st's cell against the segment across it; where the segment passes
+// above or below all of it, moves st to the first cell past the tile and returns 1, or
+// returns 2 when the segment ends or leaves the grid inside the tile; 0: the tile's cells
+// must be tested.
+FREEFORM_HD FREEFORM_FORCE_INLINE int skip_tile(const Grid& g, const GridSegment& s, const TileSkip& skip, float ra,
+                                                float rb, int step_i, int step_j, DdaState& st) {
+    const int ti = st.ci >> tile_shift, tj = st.cj >> tile_shift;
+    const int k = tj * skip.tiles.tiles_x + ti;
+    const float inf = INFINITY;
+    // The tile's last grid line in the walking direction on each axis, clipped to the grid.
+    const int bi = s.ad > 0.0f ? (((ti + 1) << tile_shift) < g.last_ci + 1 ? (ti + 1) << tile_shift : g.last_ci + 1)
+                               : ti << tile_shift;
+    const int bj = s.bd > 0.0f ? (((tj + 1) << tile_shift) < g.last_cj + 1 ? (tj + 1) << tile_shift : g.last_cj + 1)
+                               : tj << tile_shift;
+    const float te_i = ra != 0.0f ? (float(bi) - s.gx) * ra : inf;
+    const float te_j = rb != 0.0f ? (float(bj) - s.gy) * rb : inf;
+    const float te = min_f(te_i, te_j);
+    const float z0 = skip.ez + st.tc * skip.dz, z1 = skip.ez + min_f(te, s.t_len) * skip.dz;
+    if (min_f(z0, z1) <= skip.tiles.hi[k] + skip.z_pad && max_f(z0, z1) >= skip.tiles.lo[k] - skip.z_pad) return 0;
+    if (te >= s.t_len) return 2;
+    if (te_i < te_j) {  // leaves across the i line (the walk's rule: i first only when strictly earlier)
+        st.ci = s.ad > 0.0f ? bi : bi - 1;
+        if (st.ci < 0 || st.ci > g.last_ci) return 2;
+        st.tc = te_i;
+        while (st.tn_j <= te_i) st.line_j += float(step_j), st.tn_j = (st.line_j - s.gy) * rb, st.cj += step_j;
+        st.line_i = float(st.ci + (s.ad > 0.0f ? 1 : 0));
+        st.tn_i = (st.line_i - s.gx) * ra;
+    } else {
+        st.cj = s.bd > 0.0f ? bj : bj - 1;
+        if (st.cj < 0 || st.cj > g.last_cj) return 2;
+        st.tc = te_j;
+        while (st.tn_i < te_j) st.line_i += float(step_i), st.tn_i = (st.line_i - s.gx) * ra, st.ci += step_i;
+        st.line_j = float(st.cj + (s.bd > 0.0f ? 1 : 0));
+        st.tn_j = (st.line_j - s.gy) * rb;
+    }
+    return 1;
+}
+
 // The one grid traversal (the SIMD packet walk of trace/packet.hpp is its tested twin):
 // calls on_cell(ci, cj, tc, tc_end) for every cell the segment crosses, in walking order,
 // with [tc, tc_end] the part over the cell (t from the segment's start), until on_cell
@@ -301,46 +370,58 @@ FREEFORM_HD FREEFORM_FORCE_INLINE bool grid_segment(const View& hf, const Grid& 
 // that stays over one cell (light arriving steeply, light leaving a mirror steeply) is
 // handed over without setting up the walk. Cell crossings are multiplications by the
 // reciprocal direction, recomputed from the grid line rather than accumulated, so that
-// long walks do not drift.
-template <class OnCell>
-FREEFORM_HD FREEFORM_FORCE_INLINE bool walk_cells(const Grid& g, const GridSegment& s, OnCell&& on_cell) {
+// long walks do not drift. With a TileSkip, tiles the segment passes above or below are
+// not handed over (skip_tile).
+template <class Skip, class OnCell>
+FREEFORM_HD FREEFORM_FORCE_INLINE bool walk_cells(const Grid& g, const GridSegment& s, const Skip& skip,
+                                                  OnCell&& on_cell) {
     const float inf = INFINITY;
     const float gx = s.gx, gy = s.gy, ad = s.ad, bd = s.bd, t_len = s.t_len;
     // gx, gy >= 0 here: truncation is floor.
-    int ci = int(gx), cj = int(gy);
-    ci = ci > g.last_ci ? g.last_ci : ci;
-    cj = cj > g.last_cj ? g.last_cj : cj;
+    DdaState st{};
+    st.ci = int(gx), st.cj = int(gy);
+    st.ci = st.ci > g.last_ci ? g.last_ci : st.ci;
+    st.cj = st.cj > g.last_cj ? g.last_cj : st.cj;
     {
-        const float fi = float(ci), fj = float(cj);
+        const float fi = float(st.ci), fj = float(st.cj);
         const float ex = gx + ad * t_len, ey = gy + bd * t_len;  // end of the segment
-        if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) return on_cell(ci, cj, 0.0f, t_len);
+        if (ex >= fi && ex <= fi + 1.0f && ey >= fj && ey <= fj + 1.0f) return on_cell(st.ci, st.cj, 0.0f, t_len);
     }
     // Next grid line on each axis and the t (from the segment start) of crossing it; an
     // axis that does not move (1e-30: no 0 * inf below) never crosses one.
     const int step_i = ad > 0.0f ? 1 : -1, step_j = bd > 0.0f ? 1 : -1;
     const float ra = fabsf(ad) > 1e-30f ? 1.0f / ad : 0.0f, rb = fabsf(bd) > 1e-30f ? 1.0f / bd : 0.0f;
-    float line_i = float(ci + (ad > 0.0f ? 1 : 0)), line_j = float(cj + (bd > 0.0f ? 1 : 0));
-    float tn_i = ra != 0.0f ? (line_i - gx) * ra : inf;
-    float tn_j = rb != 0.0f ? (line_j - gy) * rb : inf;
-    float tc = 0.0f;
+    st.line_i = float(st.ci + (ad > 0.0f ? 1 : 0)), st.line_j = float(st.cj + (bd > 0.0f ? 1 : 0));
+    st.tn_i = ra != 0.0f ? (st.line_i - gx) * ra : inf;
+    st.tn_j = rb != 0.0f ? (st.line_j - gy) * rb : inf;
+    st.tc = 0.0f;
     while (true) {
-        const float tn = min_f(tn_i, tn_j);
-        if (on_cell(ci, cj, tc, min_f(tn, t_len))) return true;
+        if constexpr (Skip::enabled) {
+            const int jumped = skip_tile(g, s, skip, ra, rb, step_i, step_j, st);
+            if (jumped == 2) return false;
+            if (jumped == 1) continue;
+        }
+        const float tn = min_f(st.tn_i, st.tn_j);
+        if (on_cell(st.ci, st.cj, st.tc, min_f(tn, t_len))) return true;
         if (tn >= t_len) return false;
-        if (tn_i < tn_j) {
-            ci += step_i;
-            if (ci < 0 || ci > g.last_ci) return false;
-            tc = tn_i;
-            line_i += float(step_i);
-            tn_i = (line_i - gx) * ra;
+        if (st.tn_i < st.tn_j) {
+            st.ci += step_i;
+            if (st.ci < 0 || st.ci > g.last_ci) return false;
+            st.tc = st.tn_i;
+            st.line_i += float(step_i);
+            st.tn_i = (st.line_i - gx) * ra;
         } else {
-            cj += step_j;
-            if (cj < 0 || cj > g.last_cj) return false;
-            tc = tn_j;
-            line_j += float(step_j);
-            tn_j = (line_j - gy) * rb;
+            st.cj += step_j;
+            if (st.cj < 0 || st.cj > g.last_cj) return false;
+            st.tc = st.tn_j;
+            st.line_j += float(step_j);
+            st.tn_j = (st.line_j - gy) * rb;
         }
     }
+}
+template <class OnCell>
+FREEFORM_HD FREEFORM_FORCE_INLINE bool walk_cells(const Grid& g, const GridSegment& s, OnCell&& on_cell) {
+    return walk_cells(g, s, NoSkip{}, on_cell);
 }
 
 // The nearest admissible hit of the segment (o, d) on the front (Front) or back side:
@@ -352,10 +433,13 @@ FREEFORM_HD inline bool walk(const View& hf, const Grid& g, Vec3 o, Vec3 d, std:
                              SurfaceHit& hit) {
     GridSegment s;
     if (!grid_segment(hf, g, o, d, INFINITY, 0.0f, s)) return false;
-    return walk_cells(g, s, [&](int ci, int cj, float tc, float tc_end) {
+    const auto on_cell = [&](int ci, int cj, float tc, float tc_end) {
         visit_cell(visit, ci, cj, s.ez + tc * d.z, s.ez + tc_end * d.z);
         return cell_hit<Front>(hf, g, ci, cj, s.gx, s.gy, s.ez, s.ad, s.bd, d.z, tc, tc_end, s.t0, exclude, hit);
-    });
+    };
+    if constexpr (std::is_same_v<View, HeightfieldView> && std::is_same_v<std::remove_cvref_t<Visitor>, NoCellVisitor>)
+        if (hf.tiles.lo != nullptr) return walk_cells(g, s, TileSkip{hf.tiles, s.ez, d.z, 2.0f * g.z_pad}, on_cell);
+    return walk_cells(g, s, on_cell);
 }
 
 template <class View, class Visitor>

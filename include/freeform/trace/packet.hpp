@@ -230,6 +230,61 @@ FREEFORM_FORCE_INLINE FM cell_hit(const View& hf, const hf_detail::Grid& g, FM m
     return hit;
 }
 
+// skip_tile of heightfield_kernel.hpp in every lane of `walking` (a segment over one cell
+// excepted: it is tested once): moves the lanes whose segment passes above or below their
+// cell's tile to the first cell past it, drops from `walking` those that end or leave
+// the grid inside it, and returns the lanes that skipped (their new cell is tested on
+// the next round).
+FREEFORM_FORCE_INLINE FM skip_tiles(const HeightfieldView& hf, const hf_detail::Grid& g, Walk& w, FM& walking) {
+    constexpr int shift = hf_detail::tile_shift;
+    const FM lanes = walking && !w.single;
+    const I ti = w.ci >> shift, tj = w.cj >> shift;
+    Lanes lo, hi;
+    {
+        IntLanes k;
+        (tj * hf.tiles.tiles_x + ti).copy_to(k.v, stdx::vector_aligned);
+        for (int l = 0; l < width; ++l) {
+            lo.v[l] = lanes[l] ? hf.tiles.lo[k.v[l]] : -INFINITY;
+            hi.v[l] = lanes[l] ? hf.tiles.hi[k.v[l]] : INFINITY;
+        }
+    }
+    const FM ad_pos = w.ad > 0.0f, bd_pos = w.bd > 0.0f;
+    const I up_i = (ti + 1) << shift, up_j = (tj + 1) << shift;
+    const I end_i(g.last_ci + 1), end_j(g.last_cj + 1);
+    const I bi = pick(im(ad_pos), pick(up_i < end_i, up_i, end_i), ti << shift);
+    const I bj = pick(im(bd_pos), pick(up_j < end_j, up_j, end_j), tj << shift);
+    const F te_i = pick(w.ra != 0.0f, (to_f(bi) - w.gx) * w.ra, F(INFINITY));
+    const F te_j = pick(w.rb != 0.0f, (to_f(bj) - w.gy) * w.rb, F(INFINITY));
+    const F te = min_f(te_i, te_j);
+    const F z0 = w.ez + w.tc * w.dz, z1 = w.ez + min_f(te, w.t_len) * w.dz;
+    const F pad = 2.0f * g.z_pad;
+    const FM skip = lanes && !((min_f(z0, z1) <= hi.load() + pad) && (max_f(z0, z1) >= lo.load() - pad));
+    if (stdx::none_of(skip)) return skip;
+    const FM ends = skip && (te >= w.t_len);
+    const FM via_i = skip && !ends && (te_i < te_j), via_j = skip && !ends && !(te_i < te_j);
+    w.ci = pick(im(via_i), pick(im(ad_pos), bi, bi - 1), w.ci);
+    w.cj = pick(im(via_j), pick(im(bd_pos), bj, bj - 1), w.cj);
+    const FM out = fm((w.ci < 0) || (w.ci > I(g.last_ci)) || (w.cj < 0) || (w.cj > I(g.last_cj)));
+    w.tc = pick(via_i, te_i, pick(via_j, te_j, w.tc));
+    // The other axis's lines crossed on the way, one by one, by the walk's comparison.
+    for (FM m = via_i && !out && (w.tn_j <= te_i); stdx::any_of(m); m = m && (w.tn_j <= te_i)) {
+        w.line_j = pick(m, w.line_j + to_f(w.step_j), w.line_j);
+        w.tn_j = pick(m, (w.line_j - w.gy) * w.rb, w.tn_j);
+        w.cj = pick(im(m), w.cj + w.step_j, w.cj);
+    }
+    for (FM m = via_j && !out && (w.tn_i < te_j); stdx::any_of(m); m = m && (w.tn_i < te_j)) {
+        w.line_i = pick(m, w.line_i + to_f(w.step_i), w.line_i);
+        w.tn_i = pick(m, (w.line_i - w.gx) * w.ra, w.tn_i);
+        w.ci = pick(im(m), w.ci + w.step_i, w.ci);
+    }
+    w.line_i = pick(via_i, to_f(w.ci + pick(im(ad_pos), I(1), I(0))), w.line_i);
+    w.tn_i = pick(via_i, (w.line_i - w.gx) * w.ra, w.tn_i);
+    w.line_j = pick(via_j, to_f(w.cj + pick(im(bd_pos), I(1), I(0))), w.line_j);
+    w.tn_j = pick(via_j, (w.line_j - w.gy) * w.rb, w.tn_j);
+    walking = walking && !ends && !(skip && out);
+    return skip;
+}
+
 // Writes one lane's scalar hit into the packet's hits.
 inline void store_lane(Hits& hits, int l, const SurfaceHit& h) {
     if (h.kind == HitKind::none) return;
@@ -249,11 +304,14 @@ template <class View, class Visitor>
     for (int l = 0; l < width; ++l) {
         if (!lanes[l]) continue;
         SurfaceHit h;
-        auto lane_visit = [&](int ci, int cj, float zlo, float zhi) {
-            if constexpr (Visitor::active) visit(l, ci, cj, zlo, zhi);
-        };
-        hf_detail::walk<true>(hf, g, Vec3{o.x[l], o.y[l], o.z[l]}, Vec3{d.x[l], d.y[l], d.z[l]}, exclude[l],
-                              lane_visit, h);
+        const Vec3 ol{o.x[l], o.y[l], o.z[l]}, dl{d.x[l], d.y[l], d.z[l]};
+        if constexpr (Visitor::active) {
+            auto lane_visit = [&](int ci, int cj, float zlo, float zhi) { visit(l, ci, cj, zlo, zhi); };
+            hf_detail::walk<true>(hf, g, ol, dl, exclude[l], lane_visit, h);
+        } else {
+            NoCellVisitor none;  // a plain walk: it may skip tiles
+            hf_detail::walk<true>(hf, g, ol, dl, exclude[l], none, h);
+        }
         store_lane(hits, l, h);
     }
 }
@@ -304,7 +362,14 @@ inline void nearest_hits(const View& hf, const hf_detail::Grid& g, FM m, const V
     w.tn_j = pick(w.rb != 0.0f, (w.line_j - w.gy) * w.rb, F(INFINITY));
     w.tc = F(0.0f);
     FM walking = go;
+    // Plain traces skip the tiles a segment passes above or below (skip_tiles).
+    constexpr bool can_skip = std::is_same_v<View, HeightfieldView> && !Visitor::active;
+    bool tiled = false;
+    if constexpr (can_skip) tiled = hf.tiles.lo != nullptr;
     while (stdx::any_of(walking)) {
+        if constexpr (can_skip) {
+            if (tiled && stdx::any_of(skip_tiles(hf, g, w, walking))) continue;
+        }
         const F tn = min_f(w.tn_i, w.tn_j);
         const F tc_end = pick(w.single, w.t_len, min_f(tn, w.t_len));
         const F z0 = w.ez + w.tc * w.dz, z1 = w.ez + tc_end * w.dz;

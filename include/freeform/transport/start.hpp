@@ -640,6 +640,42 @@ inline TransportMap solve_transport(const Scene& scene, const Heightmap& surface
     return m;
 }
 
+// Whether the power a surface receives at each source point depends on its shape: not
+// under collimated light along the normal, where every slope receives the same.
+inline bool power_depends_on_shape(const Scene& scene) {
+    const transport_detail::Optics optics(scene);
+    return !(optics.light == 0 && optics.direction.x == 0 && optics.direction.y == 0);
+}
+
+// How much of the light the surface `lit` receives sits elsewhere than the light that the
+// flat aperture of `surface` receives, both labelled by their flat landings: half the sum
+// of the absolute differences of the two μ (TransportOptions::lit against the plain μ),
+// each normalised to one, on a grid of the receiver's pixels, the light that lands off
+// the receiver plane one more cell. It is the share of the light a solve weighed by
+// `lit` moves, in the units of the error (docs/measures.md: Σ|R − T| / 2N), so it bounds
+// what that solve can gain; 0 where power_depends_on_shape is false. The same strata and
+// jitter for both (`seed`), `rays_per_cell` rays per grid cell: no sampling noise in the
+// difference.
+inline double lit_power_change(const Scene& scene, const Heightmap& surface, const Heightmap& lit, std::uint64_t seed,
+                               double rays_per_cell = 16) {
+    if (!power_depends_on_shape(scene)) return 0;
+    const transport_detail::Optics optics(scene);
+    TransportOptions options;
+    options.cells_per_pixel = 1;
+    options.max_grid = std::max(scene.receiver.width, scene.receiver.height);
+    const OtGrid g = transport_grid(scene, flat_footprint(scene, surface), options);
+    Light light = scene.light;
+    light.rays = std::clamp<std::int64_t>(std::int64_t(rays_per_cell * double(g.nx) * double(g.ny)), 4096, 4'000'000);
+    std::vector<Vec2d> aims;
+    const RaySet flat_rays = generate_rays(light, surface, scene.receiver, seed);
+    const RaySet lit_rays = generate_rays(light, lit, scene.receiver, seed, &aims);
+    const auto flat = transport_detail::source_density(optics, g, flat_rays, nullptr, WallStrips{}, 0);
+    const auto weighed = transport_detail::source_density(optics, g, lit_rays, &aims, WallStrips{}, 0);
+    const double a = flat.mu.sum() + flat.lost, b = weighed.mu.sum() + weighed.lost;
+    if (!(a > 0 && b > 0)) return 0;
+    return 0.5 * ((flat.mu / a - weighed.mu / b).abs().sum() + std::abs(flat.lost / a - weighed.lost / b));
+}
+
 namespace transport_detail {
 
 // Each vertex's goal (surface frame): the goal of the plane point below it, and whether
