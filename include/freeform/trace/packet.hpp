@@ -316,6 +316,33 @@ template <class View, class Visitor>
     }
 }
 
+// The DDA's start for the lanes of `go` (gx, gy, ad, bd already set): the segment's
+// length and height, the first cell, whether the segment stays over it, and the next grid
+// line on each axis with the t of crossing it (walk_cells of heightfield_kernel.hpp).
+FREEFORM_FORCE_INLINE void begin_dda(const hf_detail::Grid& g, FM go, F t0, F t1, F oz, F dz, Walk& w) {
+    w.t0 = t0;
+    w.dz = dz;
+    w.ez = oz + dz * t0;
+    w.t_len = t1 - t0;
+    const I last_ci(g.last_ci), last_cj(g.last_cj);
+    w.ci = pick(im(go), to_i(w.gx), I(0)), w.cj = pick(im(go), to_i(w.gy), I(0));
+    w.ci = pick(w.ci > last_ci, last_ci, w.ci);
+    w.cj = pick(w.cj > last_cj, last_cj, w.cj);
+    {
+        const F fi = to_f(w.ci), fj = to_f(w.cj);
+        const F ex = w.gx + w.ad * w.t_len, ey = w.gy + w.bd * w.t_len;
+        w.single = (ex >= fi) && (ex <= fi + 1.0f) && (ey >= fj) && (ey <= fj + 1.0f);
+    }
+    const FM ad_pos = w.ad > 0.0f, bd_pos = w.bd > 0.0f;
+    w.step_i = pick(im(ad_pos), I(1), I(-1)), w.step_j = pick(im(bd_pos), I(1), I(-1));
+    const FM a_moves = stdx::abs(w.ad) > 1e-30f, b_moves = stdx::abs(w.bd) > 1e-30f;
+    w.ra = pick(a_moves, 1.0f / w.ad, F(0.0f)), w.rb = pick(b_moves, 1.0f / w.bd, F(0.0f));
+    w.line_i = to_f(w.ci + pick(im(ad_pos), I(1), I(0))), w.line_j = to_f(w.cj + pick(im(bd_pos), I(1), I(0)));
+    w.tn_i = pick(w.ra != 0.0f, (w.line_i - w.gx) * w.ra, F(INFINITY));
+    w.tn_j = pick(w.rb != 0.0f, (w.line_j - w.gy) * w.rb, F(INFINITY));
+    w.tc = F(0.0f);
+}
+
 // The nearest front-side hit of every lane's segment (o, d) in m: walk<true> of
 // heightfield_kernel.hpp. Lanes whose segment needs the walk's rare set-up (entry beside
 // the grid, a direction parallel to the surface plane) are walked by the scalar kernel.
@@ -340,27 +367,8 @@ inline void nearest_hits(const View& hf, const hf_detail::Grid& g, FM m, const V
     go = go && on_grid;
     if (stdx::any_of(scalar)) scalar_lanes(hf, g, scalar, o, d, exclude, visit, hits);
     if (stdx::none_of(go)) return;
-    w.t0 = t0;
-    w.dz = d.z;
-    w.ez = o.z + d.z * t0;
-    w.t_len = t1 - t0;
+    begin_dda(g, go, t0, t1, o.z, d.z, w);
     const I last_ci(g.last_ci), last_cj(g.last_cj);
-    w.ci = pick(im(go), to_i(w.gx), I(0)), w.cj = pick(im(go), to_i(w.gy), I(0));
-    w.ci = pick(w.ci > last_ci, last_ci, w.ci);
-    w.cj = pick(w.cj > last_cj, last_cj, w.cj);
-    {
-        const F fi = to_f(w.ci), fj = to_f(w.cj);
-        const F ex = w.gx + w.ad * w.t_len, ey = w.gy + w.bd * w.t_len;
-        w.single = (ex >= fi) && (ex <= fi + 1.0f) && (ey >= fj) && (ey <= fj + 1.0f);
-    }
-    const FM ad_pos = w.ad > 0.0f, bd_pos = w.bd > 0.0f;
-    w.step_i = pick(im(ad_pos), I(1), I(-1)), w.step_j = pick(im(bd_pos), I(1), I(-1));
-    const FM a_moves = stdx::abs(w.ad) > 1e-30f, b_moves = stdx::abs(w.bd) > 1e-30f;
-    w.ra = pick(a_moves, 1.0f / w.ad, F(0.0f)), w.rb = pick(b_moves, 1.0f / w.bd, F(0.0f));
-    w.line_i = to_f(w.ci + pick(im(ad_pos), I(1), I(0))), w.line_j = to_f(w.cj + pick(im(bd_pos), I(1), I(0)));
-    w.tn_i = pick(w.ra != 0.0f, (w.line_i - w.gx) * w.ra, F(INFINITY));
-    w.tn_j = pick(w.rb != 0.0f, (w.line_j - w.gy) * w.rb, F(INFINITY));
-    w.tc = F(0.0f);
     FM walking = go;
     // Plain traces skip the tiles a segment passes above or below (skip_tiles).
     constexpr bool can_skip = std::is_same_v<View, HeightfieldView> && !Visitor::active;
