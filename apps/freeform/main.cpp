@@ -465,12 +465,21 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                 result.stopped_early ? " -- best result so far written" : "");
     // Where the time went: the budget bounds the design, its start included; the final
     // traces, the export checks and the writing of the files come after it.
+    // The smooth forms are read back and traced while they are written (io/outputs.hpp):
+    // that share of the writing is named.
+    std::string checks;
+    if (m.contains("export") && m["export"].contains("forms"))
+        for (const auto& [name, form] : m["export"]["forms"].items())
+            if (form.contains("check_seconds") && form.contains("file"))
+                checks += std::string(checks.empty() ? " (" : ", ") + form["file"].get<std::string>() +
+                          " read back and traced: " + fixed(form["check_seconds"].get<double>(), 1) + " s";
+    if (!checks.empty()) checks += ")";
     const double budget = d.options.time_budget;
     std::printf("  time: %.1f s designing%s, then %.1f s for the final traces and the export checks, %.1f s writing "
-                "the files\n",
+                "the files%s\n",
                 result.seconds,
                 budget > 0 ? (" (time budget " + fixed(budget, 1) + " s, the start included)").c_str() : "",
-                d.finish_seconds, writing_seconds);
+                d.finish_seconds, writing_seconds, checks.c_str());
     if (!result.device_failure.empty())
         std::printf("  device: %s failed at %s; the CPU went on with the same design\n", result.device.c_str(),
                     result.device_failure.c_str());
