@@ -166,7 +166,7 @@ TEST_CASE("walks that skip tiles find the scalar kernel's hits bit for bit") {
     }
     {
         Scene s = basic_scene(40, 8);
-        s.light.shape = CollimatedLight{normalize(Vec3d(-0.5, -0.6, -0.6))};
+        s.light.shape = CollimatedLight{normalize(Vec3d{-0.5, -0.6, -0.6})};
         s.receiver.frame = make_frame({-0.25, -0.3, 0.45}, {0.5, 0.6, -0.6}, {0, 0, 1}, "receiver");
         s.surface.aperture = Aperture::ellipse;
         s.surface.h_min = -0.02, s.surface.h_max = 0.02;

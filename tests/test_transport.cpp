@@ -875,7 +875,7 @@ TEST_CASE("lit power change: a raised face under a point light moves the share o
     // Collimated light 30° off the normal on a tilted face: every piece of the face
     // receives the same share of the flat one's light, so nothing moves.
     Scene sun = testing::basic_scene(100);
-    sun.light.shape = CollimatedLight{normalize(Vec3d(std::sin(0.5236), 0, -std::cos(0.5236)))};
+    sun.light.shape = CollimatedLight{normalize(Vec3d{std::sin(0.5236), 0, -std::cos(0.5236)})};
     sun.surface.h_min = -0.05, sun.surface.h_max = 0.05;
     Heightmap tilted = testing::surface_for(sun, 101);
     for (int j = 0; j < 101; ++j)
@@ -891,7 +891,7 @@ TEST_CASE("transport start: where one second solve fits, the power the fitted su
     // high above the mirror's centre moves little.
     const ImageD target = smooth_target(40);
     std::array<int, 2> chosen{};  // surface-weighted, reweighted
-    for (const Vec3d light : {Vec3d(0, -0.09, 0.06), Vec3d(0.0, 0.0, 0.6)}) {
+    for (const Vec3d light : {Vec3d{0, -0.09, 0.06}, Vec3d{0.0, 0.0, 0.6}}) {
         Scene s = testing::basic_scene(40);
         s.light.shape = PointLight{light, {}, {}};
         s.surface.h_min = -0.03, s.surface.h_max = 0.03;
