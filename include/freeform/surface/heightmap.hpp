@@ -46,16 +46,17 @@ struct HeightSnapshot {
     std::vector<float> heights;
 };
 
-// Everything a tracing kernel needs to know about a height field, as plain data.
-// The height range of each tile of cells, for the walk's block skip (trace/heightfield_kernel.hpp,
-// tile_ranges): tile (ti, tj) holds the cells ci >> tile_shift == ti, cj >> tile_shift == tj,
-// and lo/hi[tj * tiles_x + ti] bound the heights of their vertices. lo null: no tiles.
+// The height range of each tile of cells, for the walk's block skip (skip_tile in
+// trace/heightfield_kernel.hpp; made by TileRanges, trace/heightfield.hpp): tile (ti, tj)
+// holds the cells ci >> tile_shift == ti, cj >> tile_shift == tj, and lo/hi[tj * tiles_x +
+// ti] bound the heights of their vertices. lo null: no tiles.
 struct TileView {
     const float* lo = nullptr;
     const float* hi = nullptr;
     int tiles_x = 0;
 };
 
+// Everything a tracing kernel needs to know about a height field, as plain data.
 struct HeightfieldView {
     const float* h = nullptr;          // nx*ny heights
     const Vec3* n = nullptr;           // nx*ny unit vertex normals (surface frame)

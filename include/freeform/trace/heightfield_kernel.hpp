@@ -304,8 +304,10 @@ FREEFORM_HD FREEFORM_FORCE_INLINE bool grid_segment(const View& hf, const Grid& 
 // reach: every crossing time is computed from its grid line as that walk does, and the
 // lines of the other axis crossed on the way are stepped over one by one, by the walk's
 // own comparison. So a walk with tiles finds the same hit, bit for bit
-// (tests/test_heightfield.cpp), and only plain traces use it: a visitor of crossed cells
-// (the incremental evaluation's index) must see every cell.
+// (tests/test_packet.cpp), and only plain traces use it: a visitor of crossed cells (the
+// incremental evaluation's index) must see every cell. A tile is tested once, when the
+// walk enters it: testing it again for a later cell could only skip what the first test
+// kept, with the same hit either way.
 inline constexpr int tile_shift = 3;  // tiles of 8 x 8 cells
 
 struct NoSkip {
@@ -395,11 +397,16 @@ FREEFORM_HD FREEFORM_FORCE_INLINE bool walk_cells(const Grid& g, const GridSegme
     st.tn_i = ra != 0.0f ? (st.line_i - gx) * ra : inf;
     st.tn_j = rb != 0.0f ? (st.line_j - gy) * rb : inf;
     st.tc = 0.0f;
+    [[maybe_unused]] int tested = -1;  // the tile last tested, (tj << 16) | ti
     while (true) {
         if constexpr (Skip::enabled) {
-            const int jumped = skip_tile(g, s, skip, ra, rb, step_i, step_j, st);
-            if (jumped == 2) return false;
-            if (jumped == 1) continue;
+            const int tile = ((st.cj >> tile_shift) << 16) | (st.ci >> tile_shift);
+            if (tile != tested) {
+                tested = tile;
+                const int jumped = skip_tile(g, s, skip, ra, rb, step_i, step_j, st);
+                if (jumped == 2) return false;
+                if (jumped == 1) continue;
+            }
         }
         const float tn = min_f(st.tn_i, st.tn_j);
         if (on_cell(st.ci, st.cj, st.tc, min_f(tn, t_len))) return true;

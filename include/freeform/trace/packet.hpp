@@ -133,6 +133,7 @@ struct Walk {
     F gx, gy, ez, ad, bd, dz, t0, t_len;
     F tc, tn_i, tn_j, line_i, line_j, ra, rb;
     I ci, cj, step_i, step_j;
+    I tested;   // the tile last tested by skip_tiles, (tj << 16) | ti
     FM single;  // the segment stays over one cell: tested once, over its whole length
 };
 
@@ -230,15 +231,17 @@ FREEFORM_FORCE_INLINE FM cell_hit(const View& hf, const hf_detail::Grid& g, FM m
     return hit;
 }
 
-// skip_tile of heightfield_kernel.hpp in every lane of `walking` (a segment over one cell
-// excepted: it is tested once): moves the lanes whose segment passes above or below their
+// skip_tile of heightfield_kernel.hpp in every lane of `walking` that has entered a tile
+// it has not tested (a segment over one cell excepted: it is tested once): moves the lanes whose segment passes above or below their
 // cell's tile to the first cell past it, drops from `walking` those that end or leave
 // the grid inside it, and returns the lanes that skipped (their new cell is tested on
 // the next round).
 FREEFORM_FORCE_INLINE FM skip_tiles(const HeightfieldView& hf, const hf_detail::Grid& g, Walk& w, FM& walking) {
     constexpr int shift = hf_detail::tile_shift;
-    const FM lanes = walking && !w.single;
     const I ti = w.ci >> shift, tj = w.cj >> shift;
+    const I tile = (tj << 16) | ti;
+    const FM lanes = walking && !w.single && fm(tile != w.tested);
+    w.tested = pick(im(lanes), tile, w.tested);
     Lanes lo, hi;
     {
         IntLanes k;
@@ -341,6 +344,7 @@ FREEFORM_FORCE_INLINE void begin_dda(const hf_detail::Grid& g, FM go, F t0, F t1
     w.tn_i = pick(w.ra != 0.0f, (w.line_i - w.gx) * w.ra, F(INFINITY));
     w.tn_j = pick(w.rb != 0.0f, (w.line_j - w.gy) * w.rb, F(INFINITY));
     w.tc = F(0.0f);
+    w.tested = I(-1);
 }
 
 // The nearest front-side hit of every lane's segment (o, d) in m: walk<true> of
