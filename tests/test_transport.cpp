@@ -902,6 +902,8 @@ TEST_CASE("transport start: where one second solve fits, the power the fitted su
         REQUIRE(r.lit_power_change >= 0);
         MESSAGE("light at z " << light.z << ": power change " << r.lit_power_change << ", first error "
                               << r.plane_weighted_error);
+        // A target moved against landing offsets (transport/landing.hpp) would take the solve too.
+        CHECK(r.landing_offset < landing_offset_threshold);
         const bool weighed = r.lit_power_change >= surface_weight_share * r.plane_weighted_error;
         CHECK((r.surface_weighted_error >= 0) == weighed);
         CHECK((r.reweighted_error >= 0) == !weighed);

@@ -19,6 +19,7 @@
 #include "../scene/scene.hpp"
 #include "../trace/heightfield.hpp"
 #include "../trace/setup.hpp"
+#include "../transport/landing.hpp"
 #include "../transport/start.hpp"
 #include "cell_means.hpp"
 #include "options.hpp"
@@ -47,6 +48,12 @@ struct StartReport {
     // reweighting). `lit_power_change`: the share of the light the fitted surface's power
     // moves (transport/start.hpp), which made that choice (-1: not measured).
     double plane_weighted_error = -1, surface_weighted_error = -1, lit_power_change = -1;
+    // Where the first start's surface lands its vertices' light, against their goals: the
+    // mean offset in receiver pixels (LandingOffsets, transport/landing.hpp; -1: not
+    // measured), and whether the surface-weighted solve was solved for the target moved
+    // against the offsets (offset_target: a mean of at least landing_offset_threshold).
+    double landing_offset = -1;
+    bool target_offset = false;
     double seconds = 0;              // solve, fit and evaluation
     int levels_planned = 0, levels_used = 0;
     std::string plan;                // the schedule's decision, in words
@@ -154,6 +161,7 @@ struct TransportStart {
     Heightmap surface;
     SurfaceEvaluation eval;
     std::shared_ptr<const Heightmap> lit;  // the surface whose power weighed μ (TransportOptions::lit)
+    std::shared_ptr<const ImageD> solved_for;  // the target its map was solved for, where not the scene's
 };
 
 // One transport start of `initial`'s mesh: the map of `target_image` on the grid of
@@ -176,7 +184,7 @@ inline TransportStart transport_start_on(const Scene& scene, const Heightmap& in
     Heightmap surface = surface_from_transport(scene, map, initial.nx(), initial.ny(), fitted, options);
     map.report = fitted;
     const SurfaceEvaluation eval = evaluate_surface(scene, surface, judged_by, seed, threads);
-    return TransportStart{std::move(map), std::move(surface), eval, std::move(lit)};
+    return TransportStart{std::move(map), std::move(surface), eval, std::move(lit), nullptr};
 }
 
 // The transport start of `initial`'s mesh on each grid of start_grid_cells_per_pixel (a
@@ -281,6 +289,14 @@ inline ImageD reweighted_target(const ImageD& target, const CellMeans& lit) {
     return out;
 }
 
+// Whether the fitted surface may land its light away from its goals by more than a
+// sliver: wherever the power depends on the shape, or the receiver is not parallel to the
+// surface (its lever arm changes across the surface; transport/landing.hpp).
+inline bool may_land_off_goals(const Scene& scene) {
+    const transport_detail::Optics optics(scene);
+    return power_depends_on_shape(scene) || std::abs(optics.rn.z) < 1 - 1e-9;
+}
+
 // Which of the start's second solves a design of `scene` with `time_budget` seconds (0:
 // none) affords on a grid of at most `max_grid` a side: the first solves and the second
 // ones, by start_grid_limit's fixed rates, within reweight_budget_share of the budget. A
@@ -313,7 +329,7 @@ inline SecondSolves start_second_solves(const Scene& scene, double time_budget, 
     const double lit_rays = reweight_rays_per_cell * double(scene.receiver.cells());
     const double first = start_seconds_per_cell * (fine * fine + coarse * coarse) + start_seconds_per_ray * rays;
     const double warm = warm_solve_fraction * start_seconds_per_cell * fine * fine;
-    const double weighted = power_depends_on_shape(scene) ? warm + start_seconds_per_ray * rays : 0;
+    const double weighted = may_land_off_goals(scene) ? warm + start_seconds_per_ray * rays : 0;
     const double reweighted = warm + 0.25 * start_seconds_per_ray * lit_rays;
     const double budget = reweight_budget_share * time_budget;
     return {first + weighted <= budget, first + reweighted <= budget, first + weighted + reweighted <= budget};
@@ -350,31 +366,38 @@ inline TransportStart reweighted_transport_start(const Scene& scene, const Heigh
     lit_options.tolerance = 0;  // all four batches
     lit_options.seed = hash_combine(seed, 0x7265776569676874ULL);
     const CellMeans lit = designed_cell_means(scene, start.surface, target_image, lit_options, threads);
+    const ImageD& solved_for = start.solved_for ? *start.solved_for : target_image;
     TransportStart second =
-        transport_start_on(scene, initial, reweighted_target(target_image, lit), target_image, seed, threads, max_grid,
+        transport_start_on(scene, initial, reweighted_target(solved_for, lit), target_image, seed, threads, max_grid,
                            start.map.report.cells_per_pixel, start.map.strips,
                            std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi), start.lit);
     reweighted_error = second.eval.error;
     return better_start(std::move(start), std::move(second));
 }
 
-// The start's source weighed by its own surface (docs/architecture.md §4b, step 4). The map is
-// solved for the power a flat surface receives at each source point; the fitted surface
-// receives a different power there wherever the light is not along its normal: a point
-// light's distance and angle change with the height, and a tilted face catches more or
-// less of it. A mirror 6 cm above and 9 cm beside a point light, tilted 51 mm towards it,
-// started with its picture brighter at one end and darker at the other (error 0.080).
-// So the map is solved once more with μ weighed by the power the fitted surface receives
-// (TransportOptions::lit, warm from the first potential), the surface fitted again, and
-// the better of the two kept under the exact tracer. Light along the normal delivers the
-// same power to every slope (power_depends_on_shape): the caller solves nothing there.
+// The start solved again for its own surface (docs/architecture.md §4b, step 4), in two
+// ways that one solve carries. (1) Its source weighed by the surface: the map is solved for
+// the power a flat surface receives at each source point; the fitted surface receives a
+// different power there wherever the light is not along its normal: a point light's
+// distance and angle change with the height, and a tilted face catches more or less of
+// it. A mirror 6 cm above and 9 cm beside a point light, tilted 51 mm towards it, started
+// with its picture brighter at one end and darker at the other (error 0.080). So μ is
+// weighed by the power the fitted surface receives (TransportOptions::lit) where
+// power_depends_on_shape. (2) With `offsets` (landing_offsets of the start, at least
+// landing_offset_threshold), the target moved against where the surface lands its light
+// (offset_target): the letter E lit at 70° landed everything inside it 3.5 px towards its
+// top. The solve is warm from the first potential, the surface fitted again, and the
+// better of the two kept under the exact tracer against the scene's target.
 inline TransportStart surface_weighted_start(const Scene& scene, const Heightmap& initial, const ImageD& target_image,
                                              TransportStart start, std::uint64_t seed, int threads, int max_grid,
-                                             double& surface_weighted_error) {
+                                             double& surface_weighted_error, const LandingOffsets* offsets = nullptr) {
+    std::shared_ptr<const ImageD> moved;
+    if (offsets) moved = std::make_shared<const ImageD>(offset_target(target_image, *offsets, scene.receiver));
     TransportStart second = transport_start_on(
-        scene, initial, target_image, target_image, seed, threads, max_grid, start.map.report.cells_per_pixel,
-        start.map.strips, std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi),
-        std::make_shared<const Heightmap>(start.surface));
+        scene, initial, moved ? *moved : target_image, target_image, seed, threads, max_grid,
+        start.map.report.cells_per_pixel, start.map.strips, std::make_shared<const Eigen::ArrayXXd>(start.map.ot.phi),
+        power_depends_on_shape(scene) ? std::make_shared<const Heightmap>(start.surface) : nullptr);
+    second.solved_for = std::move(moved);
     surface_weighted_error = second.eval.error;
     return better_start(std::move(start), std::move(second));
 }
@@ -412,14 +435,20 @@ inline DesignStart make_design_start(const Scene& scene, Heightmap initial, cons
     try {
         best = best_transport_start(scene, initial, target_image, seed, threads, max_grid);
         bool weighed = false;
-        if (solves.surface_weighted && power_depends_on_shape(scene)) {
+        if (solves.surface_weighted && may_land_off_goals(scene)) {
             StartReport& r = start.report;
-            r.lit_power_change = lit_power_change(scene, initial, best->surface, hash_combine(seed, 0x6c6974ULL));
-            weighed = solves.both || r.lit_power_change >= surface_weight_share * best->eval.error;
+            const LandingOffsets offsets = landing_offsets(scene, best->map, best->surface);
+            r.landing_offset = offsets.mean_pixels;
+            const bool offset = offsets.mean_pixels >= landing_offset_threshold;
+            if (power_depends_on_shape(scene))
+                r.lit_power_change = lit_power_change(scene, initial, best->surface, hash_combine(seed, 0x6c6974ULL));
+            weighed = offset || (r.lit_power_change >= 0 &&
+                                 (solves.both || r.lit_power_change >= surface_weight_share * best->eval.error));
             r.plane_weighted_error = best->eval.error;
+            r.target_offset = weighed && offset;
             if (weighed)
                 best = surface_weighted_start(scene, initial, target_image, std::move(*best), seed, threads, max_grid,
-                                              r.surface_weighted_error);
+                                              r.surface_weighted_error, offset ? &offsets : nullptr);
         }
         start.report.unreweighted_error = best->eval.error;
         if (solves.both || (solves.reweighted && !weighed))

@@ -60,12 +60,16 @@ inline nlohmann::json start_report_json(const StartReport& s) {
     if (!s.fallback_reason.empty()) j["fallback_reason"] = s.fallback_reason;
     if (s.error >= 0) j["error"] = s.error, j["energy"] = s.energy;
     if (s.flat_error >= 0) j["flat_error"] = s.flat_error;
-    if (s.lit_power_change >= 0) {
-        // design/start.hpp, surface_weight_share: "solved" false where the budget chose the reweighting
+    if (s.landing_offset >= 0) {
+        // design/start.hpp, surface_weight_share: "solved" false where the budget chose the reweighting;
+        // "power_change" only where the power depends on the surface's shape; "landing_offset" in
+        // receiver pixels, "target_offset" whether the solve's target was moved against it
         nlohmann::json& w = j["surface_weighted"];
-        w = {{"power_change", s.lit_power_change},
+        w = {{"landing_offset", s.landing_offset},
+             {"target_offset", s.target_offset},
              {"first_error", s.plane_weighted_error},
              {"solved", s.surface_weighted_error >= 0}};
+        if (s.lit_power_change >= 0) w["power_change"] = s.lit_power_change;
         if (s.surface_weighted_error >= 0)
             w["second_error"] = s.surface_weighted_error, w["kept"] = s.surface_weighted_error < s.plane_weighted_error;
     }

@@ -338,6 +338,7 @@ inline void pack_start(Packer& p, const SharedStart& s) {
     p.put(r.error), p.put(r.energy), p.put(r.flat_error), p.put(r.seconds);
     p.put(r.unreweighted_error), p.put(r.reweighted_error);
     p.put(r.plane_weighted_error), p.put(r.surface_weighted_error), p.put(r.lit_power_change);
+    p.put(r.landing_offset), p.put(r.target_offset);
     p.put(r.levels_planned), p.put(r.levels_used);
     p.put_string(r.plan);
     p.put(s.transport), p.put(s.skip);
@@ -360,6 +361,7 @@ inline SharedStart unpack_start(Unpacker& u) {
     r.unreweighted_error = u.get<double>(), r.reweighted_error = u.get<double>();
     r.plane_weighted_error = u.get<double>(), r.surface_weighted_error = u.get<double>();
     r.lit_power_change = u.get<double>();
+    r.landing_offset = u.get<double>(), r.target_offset = u.get<bool>();
     r.levels_planned = u.get<int>(), r.levels_used = u.get<int>();
     r.plan = u.get_string();
     s.transport = u.get<bool>();
