@@ -514,6 +514,10 @@ void print_design_summary(const CompletedDesign& d, const json& m, const fs::pat
                     "(widen the bounds to keep the whole map)",
                     st.transport.height_range * 1e3,
                     (st.transport.height_range - st.transport.height_excess) * 1e3);
+    if (st.used == StartKind::transport && st.target_offset && st.surface_weighted_error < st.plane_weighted_error)
+        std::printf("; solved again for the target moved against where its first surface landed the light "
+                    "(%.1f px from the map's goals on average; docs/architecture.md §4b)",
+                    st.landing_offset);
     if (st.levels_planned > 0) std::printf("; %d of %d planned levels run", st.levels_used, st.levels_planned);
     std::printf("\n");
     std::string files;
